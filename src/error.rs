@@ -1,0 +1,41 @@
+//! The crate-level error: one variant per layer, so a caller can tell bad input (exit code 2)
+//! from a failure of the machine or the solver (exit code 1).
+
+use std::path::PathBuf;
+
+/// Any error foldfree returns.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The input mesh is unusable (names the file and the face / edge / vertex).
+    #[error(transparent)]
+    Mesh(#[from] crate::mesh::MeshError),
+    /// Vulkan is missing or failed.
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+    /// A numerical solve failed (no convergence, non-finite values, flipped result).
+    #[error(transparent)]
+    Solve(#[from] crate::linalg::SolveError),
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The request itself is wrong (bad option combination, refusing to overwrite the input).
+    #[error("{0}")]
+    Usage(String),
+}
+
+impl Error {
+    /// Process exit code for the CLI: 2 for bad input or usage, 1 for everything else.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Error::Mesh(_) | Error::Usage(_) => 2,
+            Error::Gpu(_) | Error::Solve(_) | Error::Io { .. } => 1,
+        }
+    }
+}
+
+/// Result alias used across the crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

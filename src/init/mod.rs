@@ -1,0 +1,2 @@
+//! Starting maps: Tutte embedding (flip-free on a convex boundary).
+#![forbid(unsafe_code)]

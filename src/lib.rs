@@ -1,0 +1,17 @@
+//! foldfree: foldover-free, low-distortion maps of meshes.
+//!
+//! Data flows one way:
+//! `file → mesh (validate, topology) → init (Tutte) → solver → recover → metrics → file/report`.
+//!
+//! Only [`gpu`] contains `unsafe` code; every other module forbids it.
+
+pub mod error;
+pub mod gpu;
+pub mod init;
+pub mod linalg;
+pub mod mesh;
+pub mod metrics;
+pub mod param;
+pub mod report;
+
+pub use error::{Error, Result};

@@ -1,0 +1,2 @@
+//! frames
+pub struct FaceFrames;

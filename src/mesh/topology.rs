@@ -1,0 +1,2 @@
+//! topology
+pub struct Topology;

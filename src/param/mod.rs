@@ -1,0 +1,2 @@
+//! Parameterization solvers.
+#![forbid(unsafe_code)]

@@ -1,0 +1,2 @@
+//! The JSON run report.
+#![forbid(unsafe_code)]
