@@ -12,6 +12,7 @@ pub mod linalg;
 pub mod mesh;
 pub mod metrics;
 pub mod param;
+pub mod pipeline;
 pub mod report;
 
 pub use error::{Error, Result};

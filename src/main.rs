@@ -1,1 +1,283 @@
-fn main() {}
+//! `foldfree`: the command-line front end. It parses arguments, calls the library, prints, and
+//! maps errors to exit codes (0 success, 2 bad input or usage, 1 any other failure).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use foldfree::init::tutte::TutteWeights;
+use foldfree::mesh;
+use foldfree::param::admm::AdmmOptions;
+use foldfree::param::Energy;
+use foldfree::pipeline::{self, BackendChoice, InitMethod, ParamJob, SolverChoice};
+
+#[derive(Parser)]
+#[command(name = "foldfree", version, about = "Foldover-free, low-distortion maps of meshes (Vulkan compute + CPU f64)")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Topology facts and the validation verdict of a mesh.
+    Stats {
+        input: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// UV-parameterize a disk-topology mesh without flipped triangles.
+    Param(ParamArgs),
+    /// List the Vulkan devices and which one would be used.
+    Devices,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum InitArg {
+    /// Tutte embedding, uniform weights (flip-free on a convex boundary).
+    Tutte,
+    /// Tutte embedding with Floater's mean-value weights.
+    TutteMeanValue,
+    /// Least-squares conformal map (may flip a few faces; ADMM repairs them).
+    Lscm,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SolverArg {
+    /// Output the start map.
+    None,
+    /// ADMM (per-face Newton, per-edge projection, dual update).
+    Admm,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum EnergyArg {
+    /// Conformal: MIPS.
+    Mips,
+    /// Isometric: symmetric Dirichlet.
+    Sd,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum BackendArg {
+    /// Vulkan on a real GPU, else the CPU backend.
+    Auto,
+    Cpu,
+    Vulkan,
+}
+
+#[derive(clap::Args)]
+struct ParamArgs {
+    /// Input OBJ (triangles or polygons; polygons are fan-triangulated).
+    input: PathBuf,
+    /// Output OBJ: the input's v and f order, plus one vt per vertex.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Start map. Default: lscm with the ADMM solver, tutte without.
+    #[arg(long, value_enum)]
+    init: Option<InitArg>,
+    #[arg(long, value_enum, default_value = "admm")]
+    solver: SolverArg,
+    #[arg(long, value_enum, default_value = "mips")]
+    energy: EnergyArg,
+    #[arg(long, value_enum, default_value = "auto")]
+    backend: BackendArg,
+    /// Vulkan device: a substring of its name or its index (see `foldfree devices`).
+    #[arg(long)]
+    device: Option<String>,
+    /// ADMM penalty as μ·#faces (default: 100 for MIPS, 300 for SD; raised automatically when
+    /// the iteration oscillates).
+    #[arg(long)]
+    mu: Option<f64>,
+    /// ADMM iteration cap.
+    #[arg(long)]
+    max_iters: Option<usize>,
+    /// Least-squares re-synchronisation period (iterations, 0 = off).
+    #[arg(long)]
+    resync: Option<usize>,
+    /// Keep μ fixed.
+    #[arg(long)]
+    fixed_mu: bool,
+    /// Write the JSON report here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Enable the Khronos validation layer (any message fails the run).
+    #[arg(long)]
+    validation: bool,
+    /// No progress display.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+fn run_stats(input: PathBuf, json: bool) -> foldfree::Result<()> {
+    let (m, topo, report) = mesh::load(&input, &mesh::ValidateOptions::default())?;
+    let genus = topo.genus();
+    if json {
+        let v = serde_json::json!({
+            "file": input.display().to_string(),
+            "vertices": m.positions.len(),
+            "faces": m.faces.len(),
+            "edges": topo.edges.len(),
+            "interior_edges": topo.interior_edges.len(),
+            "boundary_edges": topo.boundary_edges.len(),
+            "boundary_loops": topo.boundary_loops.len(),
+            "components": topo.components,
+            "euler_characteristic": topo.euler_characteristic,
+            "genus": genus,
+            "unreferenced_vertices": report.unreferenced_vertices.len(),
+            "is_disk": topo.is_disk(),
+            "description": topo.describe(),
+            "bbox_diagonal": report.bbox_diagonal,
+            "min_face_area": report.min_face_area,
+            "valid": true,
+        });
+        println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+    } else {
+        println!("file: {}", input.display());
+        println!("vertices: {} ({} unreferenced)", m.positions.len(), report.unreferenced_vertices.len());
+        println!("faces: {}", m.faces.len());
+        println!(
+            "edges: {} ({} interior, {} boundary)",
+            topo.edges.len(),
+            topo.interior_edges.len(),
+            topo.boundary_edges.len()
+        );
+        let lens: Vec<usize> = topo.boundary_loops.iter().map(Vec::len).collect();
+        println!("boundary loops: {} {:?}", lens.len(), lens);
+        println!("components: {}", topo.components);
+        println!("euler characteristic: {}", topo.euler_characteristic);
+        match genus {
+            Some(g) => println!("genus: {g}"),
+            None => println!("genus: undefined"),
+        }
+        println!("bbox diagonal: {:.6e}, min face area: {:.6e}", report.bbox_diagonal, report.min_face_area);
+        println!("topology: {}", topo.describe());
+        println!("valid: yes; disk: {}", if topo.is_disk() { "yes" } else { "no" });
+    }
+    Ok(())
+}
+
+fn run_devices() -> foldfree::Result<()> {
+    let ctx = foldfree::gpu::Context::new(&foldfree::gpu::ContextDesc::default())?;
+    println!("selected: {} ({})", ctx.device_name(), ctx.device_type_name());
+    Ok(())
+}
+
+fn run_param(args: ParamArgs) -> foldfree::Result<()> {
+    let energy = match args.energy {
+        EnergyArg::Mips => Energy::Mips,
+        EnergyArg::Sd => Energy::SymmetricDirichlet,
+    };
+    let solver = match args.solver {
+        SolverArg::None => SolverChoice::None,
+        SolverArg::Admm => SolverChoice::Admm,
+    };
+    let init = match args.init {
+        Some(InitArg::Tutte) => InitMethod::Tutte(TutteWeights::Uniform),
+        Some(InitArg::TutteMeanValue) => InitMethod::Tutte(TutteWeights::MeanValue),
+        Some(InitArg::Lscm) => InitMethod::Lscm,
+        None if solver == SolverChoice::None => InitMethod::Tutte(TutteWeights::Uniform),
+        None => InitMethod::Lscm,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // A second Ctrl-C while stopping falls through to the default handler's exit.
+        let _ = ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        });
+    }
+    let mut admm = AdmmOptions::for_energy(energy);
+    admm.mu_rel = args.mu;
+    if let Some(n) = args.max_iters {
+        admm.max_iters = n;
+    }
+    if let Some(r) = args.resync {
+        admm.resync_every = r;
+    }
+    admm.adaptive_mu = !args.fixed_mu;
+    admm.stop = Some(stop);
+    let mut job = ParamJob::new(&args.input, &args.output);
+    job.init = init;
+    job.solver = solver;
+    job.backend = match args.backend {
+        BackendArg::Auto => BackendChoice::Auto,
+        BackendArg::Cpu => BackendChoice::Cpu,
+        BackendArg::Vulkan => BackendChoice::Vulkan,
+    };
+    job.device = args.device.clone();
+    job.validation = args.validation;
+    job.admm = admm;
+
+    let bar = if args.quiet || solver == SolverChoice::None {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let b = indicatif::ProgressBar::new(job.admm.max_iters as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} ADMM [{bar:30}] {pos}/{len} it {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    };
+    let out = pipeline::run_param(&job, &mut |h| {
+        bar.set_position(h.iteration as u64);
+        bar.set_message(format!(
+            "μ·F {:.0}  primal {:.1e}  dual {:.1e}  E {:.6}",
+            h.mu_rel, h.primal, h.dual, h.energy
+        ));
+    });
+    bar.finish_and_clear();
+    let out = out?;
+    let r = &out.report;
+    if let Some(path) = &args.report {
+        pipeline::write_report(path, r)?;
+    }
+    eprintln!(
+        "foldfree: {} → {}: {} faces, backend {} ({}), init {}, solver {}{}",
+        r.input,
+        r.output,
+        r.faces,
+        r.backend,
+        r.device,
+        r.init,
+        r.solver,
+        match r.converged {
+            Some(true) => format!(", converged in {} iterations", r.iterations),
+            Some(false) => format!(", NOT converged after {} iterations (best flip-free map written)", r.iterations),
+            None => String::new(),
+        }
+    );
+    eprintln!(
+        "  flips {}  δcon mean {:.4} (area-weighted {:.4}, max {:.3})  MIPS {:.5}  SD {:.5}  boundary overlaps {}  {:.2} s",
+        r.flips,
+        r.delta_con_mean,
+        r.delta_con_area_mean,
+        r.delta_con_max,
+        r.mips_energy,
+        r.sd_energy,
+        r.boundary_self_intersections,
+        r.seconds
+    );
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Stats { input, json } => run_stats(input, json),
+        Command::Param(args) => run_param(args),
+        Command::Devices => run_devices(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("foldfree: error: {e}");
+            ExitCode::from(e.exit_code() as u8)
+        }
+    }
+}

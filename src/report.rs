@@ -1,2 +1,40 @@
-//! The JSON run report.
+//! The JSON run report written by `foldfree param --report R.json`.
+//!
+//! Non-finite numbers (the energies of a flipped map) are written as `null`, since JSON has no
+//! infinity; `flips` tells why.
 #![forbid(unsafe_code)]
+
+use serde::Serialize;
+
+/// Everything a run measured. Field names are part of the CLI's interface.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ParamReport {
+    pub input: String,
+    pub output: String,
+    pub vertices: usize,
+    pub faces: usize,
+    pub interior_edges: usize,
+    pub boundary_loops: usize,
+    pub unreferenced_vertices: usize,
+    pub flips: usize,
+    pub delta_con_mean: f64,
+    pub delta_con_area_mean: f64,
+    pub delta_con_max: f64,
+    pub mips_energy: f64,
+    pub sd_energy: f64,
+    pub boundary_self_intersections: usize,
+    pub seconds: f64,
+    pub seconds_load: f64,
+    pub seconds_init: f64,
+    pub seconds_solve: f64,
+    pub backend: String,
+    pub device: String,
+    pub init: String,
+    pub solver: String,
+    pub energy: Option<String>,
+    pub iterations: usize,
+    pub converged: Option<bool>,
+    pub mu_rel: Option<f64>,
+    pub init_flips: usize,
+    pub history: Vec<crate::param::admm::History>,
+}

@@ -1,8 +1,38 @@
 //! The Vulkan layer: the only module with `unsafe` code.
+//!
+//! Built on ash (raw Vulkan) and gpu-allocator. Every object is RAII and holds the shared device
+//! state through an `Arc`, so nothing can outlive the device it came from; handles are named
+//! (`VK_EXT_debug_utils`) for validation messages; every `unsafe` block does one thing and says
+//! why it is sound. Vulkan 1.2 with `VK_KHR_synchronization2`.
+//!
+//! - [`Context`]: instance, device, compute queue, allocator, collected validation messages.
+//! - [`Buffer`]: storage and staging buffers with host upload/download.
+//! - [`ComputePipeline`] + [`DescriptorSet`]: a kernel and the buffers bound to it.
+//! - [`Recorder`]: records dispatches, barriers ([`Access`] → [`Access`]), copies, timestamps;
+//!   submits and waits.
+//! - [`TimestampPool`]: GPU timestamps for per-kernel timings.
+//! - [`shaders`]: the SPIR-V compiled from `glsl/` by `build.rs`.
 
-/// Every way Vulkan can be missing or fail.
-#[derive(Debug, thiserror::Error)]
-pub enum GpuError {
-    #[error("Vulkan loader not found ({0}); install it with: apt-get install libvulkan1 mesa-vulkan-drivers")]
-    NoLoader(String),
-}
+mod buffer;
+mod command;
+mod context;
+mod conv;
+mod debug;
+mod error;
+mod pipeline;
+mod query;
+pub mod shaders;
+
+pub use buffer::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
+pub use command::{grid_1d, Access, Recorder};
+pub use context::{
+    required_features, Context, ContextDesc, DeviceLimits, HostDesc, RequiredFeatures, API_VERSION,
+    DEVICE_ENV, SYNC_VALIDATION_ENV,
+};
+pub use debug::MessageLog;
+pub use error::{map_result, GpuError, GpuResult, INSTALL_HINT};
+pub use pipeline::{ComputePipeline, ComputePipelineDesc, DescriptorSet, DEFAULT_WORKGROUP_SIZE};
+pub use query::TimestampPool;
+
+/// Raw Vulkan types, for hosts that bring their own device ([`Context::from_host`]).
+pub use ash::vk;

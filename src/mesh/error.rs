@@ -10,21 +10,59 @@ pub enum MeshError {
     #[error("{file}: the mesh has no faces")]
     Empty { file: PathBuf },
     #[error("{file}: vertex {vertex} has a non-finite coordinate ({value})")]
-    NonFinite { file: PathBuf, vertex: usize, value: f64 },
+    NonFinite {
+        file: PathBuf,
+        vertex: usize,
+        value: f64,
+    },
     #[error("{file}: face {face} refers to vertex {index}, but there are only {count} vertices")]
-    IndexOutOfRange { file: PathBuf, face: usize, index: i64, count: usize },
+    IndexOutOfRange {
+        file: PathBuf,
+        face: usize,
+        index: i64,
+        count: usize,
+    },
     #[error("{file}: face {face} uses vertex {vertex} twice")]
-    RepeatedVertex { file: PathBuf, face: usize, vertex: usize },
+    RepeatedVertex {
+        file: PathBuf,
+        face: usize,
+        vertex: usize,
+    },
     #[error("{file}: face {face} is degenerate (area {area:.3e}, below {threshold:.3e} = tolerance x bbox diagonal^2)")]
-    Degenerate { file: PathBuf, face: usize, area: f64, threshold: f64 },
+    Degenerate {
+        file: PathBuf,
+        face: usize,
+        area: f64,
+        threshold: f64,
+    },
     #[error("{file}: edge ({v0}, {v1}) is non-manifold: it is shared by {count} faces (faces {faces:?})")]
-    NonManifoldEdge { file: PathBuf, v0: usize, v1: usize, count: usize, faces: Vec<usize> },
+    NonManifoldEdge {
+        file: PathBuf,
+        v0: usize,
+        v1: usize,
+        count: usize,
+        faces: Vec<usize>,
+    },
     #[error("{file}: vertex {vertex} is non-manifold: its faces form {fans} separate fans")]
-    NonManifoldVertex { file: PathBuf, vertex: usize, fans: usize },
+    NonManifoldVertex {
+        file: PathBuf,
+        vertex: usize,
+        fans: usize,
+    },
     #[error("{file}: inconsistent orientation: faces {f0} and {f1} traverse edge ({v0}, {v1}) in the same direction")]
-    InconsistentOrientation { file: PathBuf, f0: usize, f1: usize, v0: usize, v1: usize },
+    InconsistentOrientation {
+        file: PathBuf,
+        f0: usize,
+        f1: usize,
+        v0: usize,
+        v1: usize,
+    },
     #[error("{file}: face {face} is a duplicate of face {other}")]
-    DuplicateFace { file: PathBuf, face: usize, other: usize },
+    DuplicateFace {
+        file: PathBuf,
+        face: usize,
+        other: usize,
+    },
     #[error("{file}: not a disk: {what}; this operation needs one connected component with one boundary loop and genus 0")]
     NotDisk { file: PathBuf, what: String },
     #[error("{file}: {what}")]

@@ -10,7 +10,9 @@ pub mod validate;
 
 pub use error::MeshError;
 pub use frames::FaceFrames;
+pub use obj::{read_obj, read_obj_with_info, write_atomic, write_obj_with_uv, ObjInfo};
 pub use topology::Topology;
+pub use validate::{load, ValidateOptions, ValidationReport};
 
 /// Sentinel for "no face" (the missing side of a boundary edge).
 pub const NO_FACE: u32 = u32::MAX;

@@ -1,1 +1,243 @@
-//! validate
+//! Input checks that turn every way a mesh can break the solvers into a precise error, before
+//! any numeric work: the solvers may then assume finite, non-degenerate, manifold, consistently
+//! oriented triangles.
+
+use std::path::Path;
+
+use super::{obj, MeshError, Topology, TriMesh};
+
+/// Thresholds of [`validate`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidateOptions {
+    /// A face is degenerate when its area ≤ `degenerate_rel_tol` × (bounding-box diagonal)²;
+    /// relative, so the test does not depend on the file's units.
+    pub degenerate_rel_tol: f64,
+    /// Refuse meshes with more faces than this (a memory / time guard for the caller).
+    pub max_faces: Option<usize>,
+}
+
+impl Default for ValidateOptions {
+    fn default() -> Self {
+        ValidateOptions {
+            degenerate_rel_tol: 1e-12,
+            max_faces: None,
+        }
+    }
+}
+
+/// Facts found while validating that later stages need.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValidationReport {
+    /// Vertices used by no face, ascending (kept in the output, ignored by the solvers).
+    pub unreferenced_vertices: Vec<u32>,
+    /// Diagonal of the bounding box of the referenced vertices (the mesh's length scale).
+    pub bbox_diagonal: f64,
+    /// Smallest face area, in the file's units.
+    pub min_face_area: f64,
+}
+
+/// Checks the mesh; the first failure in this order is returned: no faces, too many faces,
+/// non-finite coordinate (any vertex, referenced or not), face index out of range, repeated
+/// vertex in a face, degenerate face, duplicate face (same vertex set), non-manifold edge,
+/// non-manifold vertex, inconsistent orientation. Each error names the element; indices are
+/// 0-based.
+pub fn validate(
+    mesh: &TriMesh,
+    file: &Path,
+    opts: &ValidateOptions,
+) -> Result<ValidationReport, MeshError> {
+    validate_with_topology(mesh, file, opts).map(|(report, _)| report)
+}
+
+/// Reads an OBJ file, validates it and builds its topology (built once, shared by the checks).
+pub fn load(
+    path: &Path,
+    opts: &ValidateOptions,
+) -> Result<(TriMesh, Topology, ValidationReport), MeshError> {
+    let mesh = obj::read_obj(path)?;
+    let (report, topo) = validate_with_topology(&mesh, path, opts)?;
+    Ok((mesh, topo, report))
+}
+
+/// [`validate`], also returning the topology the manifold and orientation checks needed.
+pub fn validate_with_topology(
+    mesh: &TriMesh,
+    file: &Path,
+    opts: &ValidateOptions,
+) -> Result<(ValidationReport, Topology), MeshError> {
+    let nv = mesh.positions.len();
+    let nf = mesh.faces.len();
+    if nf == 0 {
+        return Err(MeshError::Empty {
+            file: file.to_path_buf(),
+        });
+    }
+    if let Some(max) = opts.max_faces {
+        if nf > max {
+            return Err(MeshError::TooLarge {
+                file: file.to_path_buf(),
+                what: format!("{nf} faces, more than the limit of {max}"),
+            });
+        }
+    }
+
+    // Indices and CSR offsets are u32, and NO_FACE must differ from every face index.
+    if nv >= u32::MAX as usize || nf >= (u32::MAX / 3) as usize {
+        return Err(MeshError::TooLarge {
+            file: file.to_path_buf(),
+            what: format!("{nv} vertices and {nf} faces exceed the 32-bit index range"),
+        });
+    }
+
+    for (v, p) in mesh.positions.iter().enumerate() {
+        if let Some(&value) = p.iter().find(|c| !c.is_finite()) {
+            return Err(MeshError::NonFinite {
+                file: file.to_path_buf(),
+                vertex: v,
+                value,
+            });
+        }
+    }
+
+    for (f, tri) in mesh.faces.iter().enumerate() {
+        if let Some(&v) = tri.iter().find(|&&v| v as usize >= nv) {
+            return Err(MeshError::IndexOutOfRange {
+                file: file.to_path_buf(),
+                face: f,
+                index: i64::from(v),
+                count: nv,
+            });
+        }
+    }
+
+    for (f, &[a, b, c]) in mesh.faces.iter().enumerate() {
+        let repeated = if a == b || a == c {
+            Some(a)
+        } else if b == c {
+            Some(b)
+        } else {
+            None
+        };
+        if let Some(v) = repeated {
+            return Err(MeshError::RepeatedVertex {
+                file: file.to_path_buf(),
+                face: f,
+                vertex: v as usize,
+            });
+        }
+    }
+
+    // Bounding box of the referenced vertices: a stray unused vertex must not change the scale.
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for tri in &mesh.faces {
+        for &v in tri {
+            let p = mesh.positions[v as usize];
+            for d in 0..3 {
+                lo[d] = lo[d].min(p[d]);
+                hi[d] = hi[d].max(p[d]);
+            }
+        }
+    }
+    let bbox_diagonal = (0..3).map(|d| (hi[d] - lo[d]).powi(2)).sum::<f64>().sqrt();
+    let threshold = opts.degenerate_rel_tol * bbox_diagonal * bbox_diagonal;
+    let mut min_face_area = f64::INFINITY;
+    for (f, tri) in mesh.faces.iter().enumerate() {
+        let area = face_area(mesh, tri);
+        // A NaN area (overflowing coordinates) is as unusable as a zero one.
+        if area <= threshold || area.is_nan() {
+            return Err(MeshError::Degenerate {
+                file: file.to_path_buf(),
+                face: f,
+                area,
+                threshold,
+            });
+        }
+        min_face_area = min_face_area.min(area);
+    }
+
+    // Duplicates: sort faces by their sorted vertex triple; report the duplicate with the
+    // smallest face index, naming the first face with the same vertices.
+    let mut keyed: Vec<([u32; 3], u32)> = mesh
+        .faces
+        .iter()
+        .enumerate()
+        .map(|(f, tri)| {
+            let mut key = *tri;
+            key.sort_unstable();
+            (key, f as u32)
+        })
+        .collect();
+    keyed.sort_unstable();
+    let duplicate = keyed
+        .windows(2)
+        .filter(|w| w[0].0 == w[1].0)
+        .map(|w| w[1])
+        .min_by_key(|&(_, f)| f);
+    if let Some((key, face)) = duplicate {
+        // Runs of equal keys are sorted by face index, so the run's first entry is the earliest copy.
+        let other = keyed[keyed.partition_point(|(k, _)| *k < key)].1;
+        return Err(MeshError::DuplicateFace {
+            file: file.to_path_buf(),
+            face: face as usize,
+            other: other as usize,
+        });
+    }
+
+    // Non-manifold edges (and, as a precondition, the checks above) are the topology's errors.
+    let topo = Topology::build(mesh, file)?;
+
+    if let Some(&v) = topo.nonmanifold_vertices.first() {
+        return Err(MeshError::NonManifoldVertex {
+            file: file.to_path_buf(),
+            vertex: v as usize,
+            fans: topo.fan_count(v),
+        });
+    }
+
+    for &e in &topo.interior_edges {
+        let [f0, f1] = topo.edge_faces[e as usize];
+        let d0 = directed(mesh, &topo, f0, e);
+        let d1 = directed(mesh, &topo, f1, e);
+        if d0 == d1 {
+            return Err(MeshError::InconsistentOrientation {
+                file: file.to_path_buf(),
+                f0: f0 as usize,
+                f1: f1 as usize,
+                v0: d0.0 as usize,
+                v1: d0.1 as usize,
+            });
+        }
+    }
+
+    let report = ValidationReport {
+        unreferenced_vertices: topo.unreferenced.clone(),
+        bbox_diagonal,
+        min_face_area,
+    };
+    Ok((report, topo))
+}
+
+/// ½|(p1−p0)×(p2−p0)|; indices already checked.
+fn face_area(mesh: &TriMesh, tri: &[u32; 3]) -> f64 {
+    let [p0, p1, p2] = tri.map(|v| mesh.positions[v as usize]);
+    let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
+    let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
+    let n = [
+        e1[1] * e2[2] - e1[2] * e2[1],
+        e1[2] * e2[0] - e1[0] * e2[2],
+        e1[0] * e2[1] - e1[1] * e2[0],
+    ];
+    0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+}
+
+/// Direction `(from, to)` in which face `f` traverses edge `e`.
+fn directed(mesh: &TriMesh, topo: &Topology, f: u32, e: u32) -> (u32, u32) {
+    let tri = mesh.faces[f as usize];
+    // Topology assigned `e` to one side of each face listed on it.
+    let k = topo.face_edges[f as usize]
+        .iter()
+        .position(|&x| x == e)
+        .unwrap_or(0);
+    (tri[k], tri[(k + 1) % 3])
+}

@@ -1,2 +1,8 @@
-//! Parameterization solvers.
+//! Parameterization solvers: energies, the ADMM solver (CPU twin and Vulkan), UV recovery.
 #![forbid(unsafe_code)]
+
+pub mod admm;
+pub mod energy;
+pub mod recover;
+
+pub use energy::Energy;

@@ -1,0 +1,23 @@
+#version 450
+// ADMM dual step (CPU twin: kernels::dual_update): Λ_t += μ (Y_t − A_f(t)).
+// Bindings: 0 A vec4[F], 1 Y vec4[S], 2 Λ vec4[S] (rw), 3 slot_face uint[S].
+// One thread per slot, workgroups of 64.
+#extension GL_GOOGLE_include_directive : require
+#include "grid.glsl"
+
+layout(local_size_x = 64) in;
+layout(std430, set = 0, binding = 0) readonly buffer Abuf { vec4 A[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Ybuf { vec4 Y[]; };
+layout(std430, set = 0, binding = 2) buffer Lbuf { vec4 L[]; };
+layout(std430, set = 0, binding = 3) readonly buffer SlotFace { uint slot_face[]; };
+
+layout(push_constant) uniform Push {
+    float mu;
+    uint n_slots;
+} pc;
+
+void main() {
+    uint s = global_index();
+    if (s >= pc.n_slots) return;
+    L[s] += pc.mu * (Y[s] - A[slot_face[s]]);
+}

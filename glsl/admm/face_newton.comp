@@ -1,0 +1,139 @@
+#version 450
+// ADMM face step (CPU twin: kernels::face_newton in src/param/admm/kernels.rs).
+// A_f ← argmin w_f E(A) + (nμ/2)‖A − B̄‖², B̄ = mean over the face's n slots of Y_t + Λ_t/μ,
+// by projected Newton: H⁺ = H with negative eigenvalues (cyclic Jacobi, 6 sweeps) clamped to 0,
+// p = −(w H⁺ + nμ I)⁻¹ ∇F, step min(1, 0.9 · largest flip-free step), Armijo backtracking.
+// Bindings: 0 A vec4[F] (rw), 1 Y vec4[S], 2 Λ vec4[S], 3 face_slots uvec4[F] (xyz; NO_SLOT pad),
+//           4 weight float[F], 5 A_prev vec4[F] (written when save_prev != 0).
+// One thread per face, workgroups of 64, 2-D grid (see grid.glsl).
+#extension GL_GOOGLE_include_directive : require
+#include "grid.glsl"
+#include "admm.glsl"
+
+layout(local_size_x = 64) in;
+layout(std430, set = 0, binding = 0) buffer Abuf { vec4 A[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Ybuf { vec4 Y[]; };
+layout(std430, set = 0, binding = 2) readonly buffer Lbuf { vec4 L[]; };
+layout(std430, set = 0, binding = 3) readonly buffer Slots { uvec4 face_slots[]; };
+layout(std430, set = 0, binding = 4) readonly buffer Weights { float weight[]; };
+layout(std430, set = 0, binding = 5) writeonly buffer Aprev { vec4 A_prev[]; };
+
+layout(push_constant) uniform Push {
+    float mu;
+    uint n_faces;
+    uint energy;
+    uint newton_iters;
+    uint save_prev;
+} pc;
+
+const int JACOBI_SWEEPS = 6;
+const int MAX_HALVINGS = 24;
+const float ARMIJO = 1e-4;
+const float FLIP_FREE_FRACTION = 0.9;
+
+// Cyclic Jacobi on a symmetric 4x4 (row-major in h); eigenvalues in lam, eigenvectors in the
+// columns of v (row-major).
+void jacobi_eigen4(inout float h[16], out vec4 lam, out float v[16]) {
+    for (int i = 0; i < 16; ++i) v[i] = (i % 5 == 0) ? 1.0 : 0.0;
+    for (int sweep = 0; sweep < JACOBI_SWEEPS; ++sweep) {
+        for (int p = 0; p < 3; ++p) {
+            for (int q = p + 1; q < 4; ++q) {
+                float apq = h[p * 4 + q];
+                if (apq == 0.0) continue;
+                float theta = (h[q * 4 + q] - h[p * 4 + p]) / (2.0 * apq);
+                float t = (theta >= 0.0 ? 1.0 : -1.0) / (abs(theta) + sqrt(theta * theta + 1.0));
+                float c = inversesqrt(t * t + 1.0);
+                float s = t * c;
+                for (int k = 0; k < 4; ++k) {
+                    float akp = h[k * 4 + p];
+                    float akq = h[k * 4 + q];
+                    h[k * 4 + p] = c * akp - s * akq;
+                    h[k * 4 + q] = s * akp + c * akq;
+                }
+                for (int k = 0; k < 4; ++k) {
+                    float apk = h[p * 4 + k];
+                    float aqk = h[q * 4 + k];
+                    h[p * 4 + k] = c * apk - s * aqk;
+                    h[q * 4 + k] = s * apk + c * aqk;
+                }
+                for (int k = 0; k < 4; ++k) {
+                    float vkp = v[k * 4 + p];
+                    float vkq = v[k * 4 + q];
+                    v[k * 4 + p] = c * vkp - s * vkq;
+                    v[k * 4 + q] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+    lam = vec4(h[0], h[5], h[10], h[15]);
+}
+
+float face_objective(uint kind, vec4 a, vec4 bbar, float nmu, float w) {
+    float e = energy_value(kind, a);
+    if (e >= INF) return INF;
+    vec4 d = a - bbar;
+    return w * e + 0.5 * nmu * dot(d, d);
+}
+
+void main() {
+    uint f = global_index();
+    if (f >= pc.n_faces) return;
+    vec4 a = A[f];
+    if (pc.save_prev != 0u) A_prev[f] = a;
+
+    uvec4 sl = face_slots[f];
+    vec4 bbar = vec4(0.0);
+    uint n = 0u;
+    for (int k = 0; k < 3; ++k) {
+        uint s = sl[k];
+        if (s != NO_SLOT) {
+            bbar += Y[s] + L[s] / pc.mu;
+            n += 1u;
+        }
+    }
+    float w = weight[f];
+    float nmu = float(n) * pc.mu;
+    if (n > 0u) {
+        bbar /= float(n);
+    } else {
+        // No interior edge: only the face's own energy, kept definite by a tiny proximal term.
+        nmu = 1e-9 * w;
+        bbar = a;
+    }
+
+    for (uint it = 0u; it < pc.newton_iters; ++it) {
+        float e;
+        vec4 g;
+        float h[16];
+        energy_eval(pc.energy, a, e, g, h);
+        if (!(e < INF)) break;
+        vec4 grad = w * g + nmu * (a - bbar);
+        vec4 lam;
+        float v[16];
+        jacobi_eigen4(h, lam, v);
+        vec4 p = vec4(0.0);
+        for (int k = 0; k < 4; ++k) {
+            vec4 vk = vec4(v[k], v[4 + k], v[8 + k], v[12 + k]);
+            float coef = -dot(vk, grad) / (w * max(lam[k], 0.0) + nmu);
+            p += coef * vk;
+        }
+        float slope = dot(grad, p);
+        if (!(slope < 0.0)) break;
+        vec4 d0 = a - bbar;
+        float f0 = w * e + 0.5 * nmu * dot(d0, d0);
+        float t = min(1.0, FLIP_FREE_FRACTION * max_flip_free_step(a, p));
+        bool accepted = false;
+        for (int k = 0; k < MAX_HALVINGS; ++k) {
+            vec4 cand = a + t * p;
+            float f1 = face_objective(pc.energy, cand, bbar, nmu, w);
+            if (f1 <= f0 + ARMIJO * t * slope) {
+                a = cand;
+                accepted = true;
+                break;
+            }
+            t *= 0.5;
+        }
+        if (!accepted) break;
+    }
+    A[f] = a;
+}

@@ -1,0 +1,182 @@
+//! Least-squares conformal map.
+//!
+//! B. Lévy, S. Petitjean, N. Ray, J. Maillot, "Least squares conformal maps for automatic
+//! texture atlas generation", SIGGRAPH 2002 (equivalently the discrete conformal energy of
+//! Desbrun, Meyer & Alliez 2002). The conformal energy of a piecewise-linear map (u, v) is
+//! E_C = E_D − A: the Dirichlet energy ½∫|∇u|² + |∇v|² minus the signed UV area. It is ≥ 0,
+//! zero exactly on similarities of a planar mesh, and quadratic: E_C = ½ xᵀQx with Q the
+//! 2V×2V symmetric matrix [[L, −B], [B, L]] (L the cotangent Laplacian, B the antisymmetric
+//! boundary-area form). Two pinned vertices remove the similarity null space; the rest is the
+//! SPD system Q_ff x_f = −Q_fp x_p, solved by IC(0)-preconditioned CG with u and v of each
+//! vertex interleaved (2i, 2i+1) so the incomplete factor sees the 2x2 coupling blocks.
+//!
+//! The area term is assembled per face (Σ over each triangle's directed edges); interior
+//! edges cancel exactly, so holes need no special care. This is the start point of the ADMM
+//! solver, so it is solved to a tight tolerance; it may still fold a few triangles on hard
+//! meshes, which are returned as they are (counted in [`InitReport::flips`]).
+#![forbid(unsafe_code)]
+
+use sprs::TriMat;
+
+use super::vec3::{cross, dot, norm, sub};
+use super::{
+    check_faces, check_input, count_flips, default_solve_options, orient_ccw, unique_edges,
+    unreached, InitReport,
+};
+use crate::linalg::cg::{pcg, CgOptions};
+use crate::linalg::SolveError;
+
+/// LSCM of a disk-topology mesh with the default solver options.
+///
+/// `positions`: #V×3; `faces`: #F×3, counter-clockwise; `boundary`: the boundary loop (used to
+/// choose the two pins: the boundary vertex farthest from `boundary[0]`, then the one farthest
+/// from that). The pins are placed at (0, 0) and (d, 0), d their 3D distance, so the map has
+/// roughly the scale of the surface. Returns #V×2 UVs with positive total signed area;
+/// unused vertices get (0, 0).
+pub fn lscm(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    boundary: &[u32],
+) -> Result<Vec<[f64; 2]>, SolveError> {
+    lscm_report(positions, faces, boundary, &default_solve_options()).map(|r| r.uv)
+}
+
+/// The two pinned vertices: the boundary vertex farthest (in 3D) from `boundary[0]`, then the
+/// boundary vertex farthest from that one — an approximate diameter of the boundary.
+pub fn lscm_pins(positions: &[[f64; 3]], boundary: &[u32]) -> [u32; 2] {
+    let farthest = |from: u32| -> u32 {
+        let p = positions[from as usize];
+        let mut best = (from, -1.0);
+        for &b in boundary {
+            let d = norm(sub(positions[b as usize], p));
+            if d > best.1 {
+                best = (b, d);
+            }
+        }
+        best.0
+    };
+    let a = farthest(boundary[0]);
+    [a, farthest(a)]
+}
+
+/// [`lscm`] with explicit solver options, also returning the flip count and solve statistics.
+pub fn lscm_report(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    boundary: &[u32],
+    opts: &CgOptions,
+) -> Result<InitReport, SolveError> {
+    check_input(positions, faces, boundary)?;
+    lscm_pinned(positions, faces, lscm_pins(positions, boundary), opts)
+}
+
+/// LSCM with the two pinned vertices given (`pins[0]` goes to (0, 0), `pins[1]` to (d, 0)).
+/// Pins need not lie on the boundary, but boundary pins give the least distorted maps.
+pub fn lscm_pinned(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    pins: [u32; 2],
+    opts: &CgOptions,
+) -> Result<InitReport, SolveError> {
+    let n = positions.len();
+    let [pa, pb] = pins;
+    let used = check_faces(positions, faces)?;
+    if pins.iter().any(|&p| p as usize >= n || !used[p as usize]) {
+        return Err(SolveError::InvalidInput {
+            what: format!("pinned vertices {pins:?} must be vertices of some face"),
+        });
+    }
+    let d = norm(sub(positions[pb as usize], positions[pa as usize]));
+    if pa == pb || d.is_nan() || d <= 0.0 {
+        return Err(SolveError::InvalidInput {
+            what: "LSCM needs two distinct pinned vertices at positive distance".into(),
+        });
+    }
+    let lost = unreached(n, &unique_edges(faces), &used, &[pa, pb]);
+    if lost > 0 {
+        return Err(SolveError::InvalidInput { what: format!("{lost} vertices lie in components without a pinned vertex (the mesh is not connected)") });
+    }
+    // Unknowns: u of free vertex r at 2r, v at 2r + 1.
+    let mut index = vec![u32::MAX; n];
+    let mut free = Vec::new();
+    for v in 0..n {
+        if used[v] && v as u32 != pa && v as u32 != pb {
+            index[v] = free.len() as u32;
+            free.push(v as u32);
+        }
+    }
+    let mut pinned_uv = vec![[0.0; 2]; n];
+    pinned_uv[pb as usize] = [d, 0.0];
+    let m = 2 * free.len();
+    let mut tri = TriMat::with_capacity((m, m), 30 * faces.len());
+    let mut rhs = vec![0.0; m];
+    // Adds q to Q[(vertex i, coordinate ci)][(vertex j, coordinate cj)] (ci, cj: 0 = u, 1 = v).
+    let mut add = |tri: &mut TriMat<f64>, i: usize, ci: usize, j: usize, cj: usize, q: f64| {
+        if index[i] == u32::MAX {
+            return;
+        }
+        let row = 2 * index[i] as usize + ci;
+        if index[j] != u32::MAX {
+            tri.add_triplet(row, 2 * index[j] as usize + cj, q);
+        } else {
+            // Pinned column moves to the right-hand side: b_f −= Q_fp x_p.
+            rhs[row] -= q * pinned_uv[j][cj];
+        }
+    };
+    for face in faces {
+        let v = [face[0] as usize, face[1] as usize, face[2] as usize];
+        let p = [positions[v[0]], positions[v[1]], positions[v[2]]];
+        let area2 = norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
+        let longest2 = (0..3)
+            .map(|c| dot(sub(p[(c + 1) % 3], p[c]), sub(p[(c + 1) % 3], p[c])))
+            .fold(0.0, f64::max);
+        // Dirichlet part, skipped on (numerically) zero-area faces whose cotangents blow up:
+        // ½∫_T|∇u|² = ¼ Σ_k cot θ_k (u_i − u_j)², θ_k the angle opposite edge ij.
+        if area2 > 1e-14 * longest2 {
+            for k in 0..3 {
+                let (i, j) = (v[(k + 1) % 3], v[(k + 2) % 3]);
+                let (a, b) = (sub(p[(k + 1) % 3], p[k]), sub(p[(k + 2) % 3], p[k]));
+                // w = ½ cot θ_k = ½ (a·b)/|a×b|
+                let w = 0.5 * dot(a, b) / area2;
+                for c in 0..2 {
+                    add(&mut tri, i, c, i, c, w);
+                    add(&mut tri, j, c, j, c, w);
+                    add(&mut tri, i, c, j, c, -w);
+                    add(&mut tri, j, c, i, c, -w);
+                }
+            }
+        }
+        // Area part: −A_T = −½ Σ_{directed edges a→b} (u_a v_b − u_b v_a).
+        for k in 0..3 {
+            let (a, b) = (v[k], v[(k + 1) % 3]);
+            add(&mut tri, a, 0, b, 1, -0.5);
+            add(&mut tri, b, 1, a, 0, -0.5);
+            add(&mut tri, b, 0, a, 1, 0.5);
+            add(&mut tri, a, 1, b, 0, 0.5);
+        }
+    }
+    let mut uv = vec![[0.0; 2]; n];
+    uv[pb as usize] = [d, 0.0];
+    let mut report = InitReport {
+        uv: Vec::new(),
+        flips: 0,
+        iterations: 0,
+        relative_residual: 0.0,
+        preconditioner: opts.preconditioner,
+    };
+    if m > 0 {
+        let q = tri.to_csr();
+        let mut x = vec![0.0; m];
+        let stats = pcg(&q, &rhs, &mut x, opts)?;
+        for (r, &v) in free.iter().enumerate() {
+            uv[v as usize] = [x[2 * r], x[2 * r + 1]];
+        }
+        report.iterations = stats.iterations;
+        report.relative_residual = stats.relative_residual;
+        report.preconditioner = stats.preconditioner;
+    }
+    orient_ccw(faces, &mut uv);
+    report.flips = count_flips(faces, &uv);
+    report.uv = uv;
+    Ok(report)
+}

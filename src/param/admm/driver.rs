@@ -1,0 +1,295 @@
+//! The ADMM outer loop, written once for both backends: batches of iterations on an
+//! [`Executor`], residual checks every `check_every` iterations (read back from the device, not
+//! every iteration), penalty adaptation, least-squares re-synchronisation and recovery.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use super::{AdmmProblem, AdmmState};
+use crate::param::energy::{self, Energy};
+use crate::param::recover::LeastSquaresRecovery;
+
+/// Which executor runs the iteration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Backend {
+    Cpu,
+    Vulkan,
+}
+
+/// Residual sums measured after the last iteration of a batch (twin of `residual.comp`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Residuals {
+    /// Σ_t ‖Y_t − A_ft‖²
+    pub primal2: f64,
+    /// Σ_t ‖A_ft − A_ft(previous iteration)‖²
+    pub dual2: f64,
+    /// Σ_t ‖A_ft‖²
+    pub anorm2: f64,
+    /// Σ_f w_f E(A_f)
+    pub energy: f64,
+}
+
+/// Runs batches of ADMM iterations somewhere (host threads or a Vulkan device).
+pub trait Executor {
+    /// `"cpu"` or `"vulkan"`.
+    fn backend(&self) -> &'static str;
+    /// Human-readable device name.
+    fn device(&self) -> String;
+    /// Replaces the iterate.
+    fn upload(&mut self, state: &AdmmState) -> crate::Result<()>;
+    /// Reads the iterate back.
+    fn download(&mut self) -> crate::Result<AdmmState>;
+    /// Runs `n ≥ 1` iterations with penalty `mu`; residuals of the last one.
+    fn iterate(&mut self, n: usize, mu: f64) -> crate::Result<Residuals>;
+}
+
+/// Solver settings. `Default` gives the documented defaults for MIPS; use
+/// [`AdmmOptions::for_energy`].
+#[derive(Clone, Debug)]
+pub struct AdmmOptions {
+    pub energy: Energy,
+    /// Penalty as `μ · #faces`; `None` picks the energy's default.
+    pub mu_rel: Option<f64>,
+    pub max_iters: usize,
+    /// Iterations per batch between residual read-backs.
+    pub check_every: usize,
+    /// Newton steps per face per iteration.
+    pub newton_iters: u32,
+    /// Relative primal residual `‖Y − AS‖ / ‖AS‖` tolerance.
+    pub tol_primal: f64,
+    /// Relative dual residual `‖ΔA S‖ / ‖AS‖` tolerance.
+    pub tol_dual: f64,
+    /// Relative energy change between checks.
+    pub tol_energy: f64,
+    /// Least-squares re-synchronisation period in iterations (0: off).
+    pub resync_every: usize,
+    /// Raise μ when the primal residual grows (oscillation / divergence).
+    pub adaptive_mu: bool,
+    /// Set to stop early (Ctrl-C); the best flip-free map so far is returned.
+    pub stop: Option<Arc<AtomicBool>>,
+}
+
+impl AdmmOptions {
+    /// Documented defaults per energy (see the module docs of [`super`] and BENCHMARKS.md).
+    pub fn for_energy(energy: Energy) -> AdmmOptions {
+        AdmmOptions {
+            energy,
+            mu_rel: None,
+            max_iters: 3000,
+            check_every: 25,
+            newton_iters: 1,
+            tol_primal: 1e-4,
+            tol_dual: 1e-4,
+            tol_energy: 1e-5,
+            resync_every: 0,
+            adaptive_mu: true,
+            stop: None,
+        }
+    }
+
+    /// The penalty actually used at the start, as `μ · #faces`.
+    pub fn initial_mu_rel(&self) -> f64 {
+        self.mu_rel.unwrap_or(match self.energy {
+            Energy::Mips => 100.0,
+            Energy::SymmetricDirichlet => 300.0,
+        })
+    }
+}
+
+impl Default for AdmmOptions {
+    fn default() -> Self {
+        AdmmOptions::for_energy(Energy::Mips)
+    }
+}
+
+/// One residual check.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct History {
+    pub iteration: usize,
+    pub mu_rel: f64,
+    pub primal: f64,
+    pub dual: f64,
+    /// Σ w E(A) of the per-face maps (not of a recovered map).
+    pub energy: f64,
+    pub energy_change: f64,
+    /// Set when a recovery happened at this check: flips of the recovered map and its energy.
+    pub recovered_flips: Option<usize>,
+    pub recovered_energy: Option<f64>,
+}
+
+/// What [`solve`] returns.
+#[derive(Clone, Debug)]
+pub struct AdmmResult {
+    /// #V per-vertex UVs (the best flip-free recovered map; the start map if none was).
+    pub uv: Vec<[f64; 2]>,
+    pub iterations: usize,
+    /// Residuals and energy change under tolerance, and the recovered map flip-free.
+    pub converged: bool,
+    /// Stopped by the caller's flag.
+    pub interrupted: bool,
+    pub mu_rel_final: f64,
+    pub history: Vec<History>,
+    /// Flips of the map in `uv` (0 unless even the start map was flipped).
+    pub flips: usize,
+    pub backend: &'static str,
+    pub device: String,
+}
+
+/// Σ_f w_f E(J_f(uv)) and the number of faces with `det J ≤ 0`.
+pub fn map_energy(
+    problem: &AdmmProblem,
+    faces: &[[u32; 3]],
+    uv: &[[f64; 2]],
+    e: Energy,
+) -> (f64, usize) {
+    let mut sum = 0.0;
+    let mut flips = 0;
+    for f in 0..faces.len() {
+        let a = problem.jacobian(faces, uv, f);
+        if energy::det(&a) <= 0.0 {
+            flips += 1;
+            sum = f64::INFINITY;
+        } else {
+            sum += problem.weight[f] * energy::value(e, &a);
+        }
+    }
+    (sum, flips)
+}
+
+/// Runs ADMM from the per-vertex start map `init_uv` (#V) until convergence or `max_iters`.
+///
+/// `progress` is called at every check. Never returns a flipped map silently: the result's
+/// `flips` counts them (non-zero only when the start map was already flipped and no recovered
+/// map ever was flip-free).
+pub fn solve(
+    problem: &AdmmProblem,
+    faces: &[[u32; 3]],
+    init_uv: &[[f64; 2]],
+    opts: &AdmmOptions,
+    exec: &mut dyn Executor,
+    progress: &mut dyn FnMut(&History),
+) -> crate::Result<AdmmResult> {
+    let nf = problem.n_faces().max(1) as f64;
+    let mut mu_rel = opts.initial_mu_rel();
+    let recovery = LeastSquaresRecovery::new(problem, faces, init_uv.len());
+
+    let state = AdmmState::from_uv(problem, faces, init_uv);
+    exec.upload(&state)?;
+
+    let (e0, flips0) = map_energy(problem, faces, init_uv, opts.energy);
+    let mut best_uv = init_uv.to_vec();
+    let mut best = if flips0 == 0 { e0 } else { f64::INFINITY };
+    let mut best_flips = flips0;
+    let mut uv = init_uv.to_vec();
+
+    let mut history: Vec<History> = Vec::new();
+    let mut it = 0usize;
+    let mut converged = false;
+    let mut interrupted = false;
+    let mut prev_energy = f64::NAN;
+    let mut prev_primal = f64::INFINITY;
+    let mut since_resync = 0usize;
+    while it < opts.max_iters {
+        if opts
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+        {
+            interrupted = true;
+            break;
+        }
+        let batch = opts.check_every.max(1).min(opts.max_iters - it);
+        let mu = mu_rel / nf;
+        let r = exec.iterate(batch, mu)?;
+        it += batch;
+        since_resync += batch;
+        let norm = r.anorm2.max(1e-300).sqrt();
+        let primal = r.primal2.sqrt() / norm;
+        let dual = r.dual2.sqrt() / norm;
+        let energy_change = ((r.energy - prev_energy) / r.energy).abs();
+        prev_energy = r.energy;
+        if !(primal.is_finite() && dual.is_finite() && r.energy.is_finite()) {
+            return Err(crate::linalg::SolveError::NonFinite {
+                what: format!("ADMM iterate at iteration {it}"),
+            }
+            .into());
+        }
+        let mut h = History {
+            iteration: it,
+            mu_rel,
+            primal,
+            dual,
+            energy: r.energy,
+            energy_change,
+            recovered_flips: None,
+            recovered_energy: None,
+        };
+
+        let small =
+            primal < opts.tol_primal && dual < opts.tol_dual && energy_change < opts.tol_energy;
+        let resync_due = opts.resync_every > 0 && since_resync >= opts.resync_every;
+        let last = it >= opts.max_iters;
+        if small || resync_due || last {
+            let st = exec.download()?;
+            recovery.recover(&st.a, &mut uv)?;
+            let (e, flips) = map_energy(problem, faces, &uv, opts.energy);
+            h.recovered_flips = Some(flips);
+            h.recovered_energy = Some(e);
+            if flips == 0 && e <= best {
+                best = e;
+                best_uv.clone_from(&uv);
+                best_flips = 0;
+            }
+            if small && flips == 0 {
+                converged = true;
+            } else if small && flips > 0 && opts.adaptive_mu {
+                // Residuals are small but the consensus is not yet tight enough for a flip-free
+                // recovery: tighten it.
+                mu_rel *= 2.0;
+            }
+            if resync_due && flips == 0 {
+                let mut synced = AdmmState::from_uv(problem, faces, &uv);
+                synced.lambda = st.lambda;
+                exec.upload(&synced)?;
+            }
+            if resync_due {
+                since_resync = 0;
+            }
+        }
+        if opts.adaptive_mu && !converged && primal > 1.5 * prev_primal && primal > opts.tol_primal
+        {
+            mu_rel *= 2.0;
+        }
+        prev_primal = primal;
+        progress(&h);
+        history.push(h);
+        if converged {
+            break;
+        }
+    }
+    if !converged && !interrupted && it < opts.max_iters {
+        // Unreachable by construction (the loop only exits early when converged or stopped).
+        debug_assert!(false);
+    }
+    if interrupted {
+        let st = exec.download()?;
+        recovery.recover(&st.a, &mut uv)?;
+        let (e, flips) = map_energy(problem, faces, &uv, opts.energy);
+        if flips == 0 && e <= best {
+            best_uv.clone_from(&uv);
+            best_flips = 0;
+        }
+    }
+    Ok(AdmmResult {
+        uv: best_uv,
+        iterations: it,
+        converged,
+        interrupted,
+        mu_rel_final: mu_rel,
+        history,
+        flips: best_flips,
+        backend: exec.backend(),
+        device: exec.device(),
+    })
+}

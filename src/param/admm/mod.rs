@@ -1,0 +1,183 @@
+//! ADMM parameterization (after Wu & Zhang 2020, "Mesh parameterization based on GPU parallel
+//! optimization"), with the frame handling made explicit.
+//!
+//! Variables: per face `f` a Jacobian `A_f` (2x2, row-major `[a, b, c, d]`, acting on the face's
+//! own isometric 2D frame, see [`crate::mesh::FaceFrames`]); per interior edge `e` with faces
+//! `f1 < f2` two copies `Y_e1, Y_e2` and two multipliers `Λ_e1, Λ_e2`. A *slot* is one
+//! (edge, side) pair: slot `2i + k` is side `k` of the `i`-th interior edge.
+//!
+//! Constraint: the edge maps to the same UV vector from both sides, `Y_e1 ê1 = Y_e2 ê2`, where
+//! `ê_k` is the unit edge vector (lower → higher vertex index) expressed in face `f_k`'s frame.
+//!
+//! One iteration (each step a GLSL kernel in `glsl/admm/` and a function in [`cpu`]):
+//! 1. face step: `A_f ← argmin w_f E(A) + μ/2 Σ_t ‖A − (Y_t + Λ_t/μ)‖²` by projected Newton
+//!    with a flip-proof line search (`E = +∞` for `det A ≤ 0`, so `det A_f > 0` always);
+//! 2. edge step: `Q_k = A_fk − Λ_k/μ`, `r = Q1ê1 − Q2ê2`, `Y1 = Q1 − ½ r ê1ᵀ`, `Y2 = Q2 + ½ r ê2ᵀ`;
+//! 3. dual step: `Λ_t += μ (Y_t − A_ft)`.
+//!
+//! Weights are `w_f = area_f / total area`, so `μ` is quoted as `μ_rel = μ · #faces` (with
+//! normalised weights the iterates depend on μ only through that product).
+
+pub mod cpu;
+pub mod driver;
+pub mod kernels;
+pub mod layout;
+pub mod vulkan;
+
+pub use driver::{solve, AdmmOptions, AdmmResult, Backend, History};
+
+use crate::mesh::{FaceFrames, Topology, TriMesh, NO_FACE};
+
+/// "No slot" in [`AdmmProblem::face_slots`].
+pub const NO_SLOT: u32 = u32::MAX;
+
+/// Everything the iteration needs that does not change while it runs, shaped like the GPU
+/// buffers (flat arrays, f64 here, converted to f32 on upload).
+#[derive(Clone, Debug)]
+pub struct AdmmProblem {
+    /// #F: `area_f / total area`.
+    pub weight: Vec<f64>,
+    /// #F×3: the slots of face `f` (one per interior edge of the face), `NO_SLOT` padded.
+    pub face_slots: Vec<[u32; 3]>,
+    /// #S: the face owning each slot.
+    pub slot_face: Vec<u32>,
+    /// #S: unit edge direction `ê` in the owning face's frame.
+    pub slot_dir: Vec<[f64; 2]>,
+    /// #F×3: local 2D coordinates of each face's corners (corner 0 at the origin).
+    pub local: Vec<[[f64; 2]; 3]>,
+    /// #F: face areas (3D).
+    pub area: Vec<f64>,
+}
+
+impl AdmmProblem {
+    /// Precomputes slots and edge directions from the topology and frames.
+    pub fn new(mesh: &TriMesh, topo: &Topology, frames: &FaceFrames) -> AdmmProblem {
+        let nf = mesh.faces.len();
+        let total: f64 = frames.area.iter().sum();
+        let weight = frames.area.iter().map(|a| a / total).collect();
+        let mut face_slots = vec![[NO_SLOT; 3]; nf];
+        let mut fill = vec![0usize; nf];
+        let n_slots = 2 * topo.interior_edges.len();
+        let mut slot_face = Vec::with_capacity(n_slots);
+        let mut slot_dir = Vec::with_capacity(n_slots);
+        for &e in &topo.interior_edges {
+            let [v0, v1] = topo.edges[e as usize];
+            let p0 = mesh.positions[v0 as usize];
+            let p1 = mesh.positions[v1 as usize];
+            let d = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
+            for &f in &topo.edge_faces[e as usize] {
+                debug_assert!(f != NO_FACE, "interior edges have two faces");
+                let l = frames.to_local(f as usize, d);
+                let n = (l[0] * l[0] + l[1] * l[1]).sqrt();
+                let s = slot_face.len() as u32;
+                slot_face.push(f);
+                slot_dir.push([l[0] / n, l[1] / n]);
+                let k = &mut fill[f as usize];
+                face_slots[f as usize][*k] = s;
+                *k += 1;
+            }
+        }
+        AdmmProblem {
+            weight,
+            face_slots,
+            slot_face,
+            slot_dir,
+            local: frames.local.clone(),
+            area: frames.area.clone(),
+        }
+    }
+
+    pub fn n_faces(&self) -> usize {
+        self.weight.len()
+    }
+
+    pub fn n_slots(&self) -> usize {
+        self.slot_face.len()
+    }
+
+    /// Jacobian of face `f` under the per-vertex map `uv`: `A = [u1−u0, u2−u0] · M⁻¹`,
+    /// `M = [l1−l0, l2−l0]` (local corner coordinates as columns).
+    pub fn jacobian(&self, faces: &[[u32; 3]], uv: &[[f64; 2]], f: usize) -> [f64; 4] {
+        let [i0, i1, i2] = faces[f].map(|i| i as usize);
+        let l = &self.local[f];
+        let (m00, m01, m10, m11) = (
+            l[1][0] - l[0][0],
+            l[2][0] - l[0][0],
+            l[1][1] - l[0][1],
+            l[2][1] - l[0][1],
+        );
+        let det = m00 * m11 - m01 * m10;
+        let inv = [m11 / det, -m01 / det, -m10 / det, m00 / det];
+        let du = [uv[i1][0] - uv[i0][0], uv[i2][0] - uv[i0][0]];
+        let dv = [uv[i1][1] - uv[i0][1], uv[i2][1] - uv[i0][1]];
+        [
+            du[0] * inv[0] + du[1] * inv[2],
+            du[0] * inv[1] + du[1] * inv[3],
+            dv[0] * inv[0] + dv[1] * inv[2],
+            dv[0] * inv[1] + dv[1] * inv[3],
+        ]
+    }
+}
+
+/// The iterate: per-face Jacobians, per-slot copies and multipliers.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdmmState {
+    /// #F
+    pub a: Vec<[f64; 4]>,
+    /// #S
+    pub y: Vec<[f64; 4]>,
+    /// #S
+    pub lambda: Vec<[f64; 4]>,
+}
+
+impl AdmmState {
+    /// A consistent start: `A_f` from the map `uv`, `Y = A`, `Λ = 0`. Faces the map flips (or
+    /// collapses) get the nearest similarity with positive determinant instead, so that every
+    /// `A_f` starts orientation-preserving; ADMM reconciles them.
+    pub fn from_uv(problem: &AdmmProblem, faces: &[[u32; 3]], uv: &[[f64; 2]]) -> AdmmState {
+        let mean_scale = {
+            let mut s = 0.0;
+            let mut w = 0.0;
+            for f in 0..faces.len() {
+                let a = problem.jacobian(faces, uv, f);
+                let d = crate::param::energy::det(&a);
+                if d > 0.0 && d.is_finite() {
+                    s += problem.weight[f] * d.sqrt();
+                    w += problem.weight[f];
+                }
+            }
+            if w > 0.0 {
+                s / w
+            } else {
+                1.0
+            }
+        };
+        let a: Vec<[f64; 4]> = (0..faces.len())
+            .map(|f| {
+                let a = problem.jacobian(faces, uv, f);
+                let d = crate::param::energy::det(&a);
+                if d > 1e-12 * mean_scale * mean_scale && a.iter().all(|x| x.is_finite()) {
+                    a
+                } else {
+                    orientation_preserving_similarity(&a, mean_scale)
+                }
+            })
+            .collect();
+        let y: Vec<[f64; 4]> = problem.slot_face.iter().map(|&f| a[f as usize]).collect();
+        let lambda = vec![[0.0; 4]; y.len()];
+        AdmmState { a, y, lambda }
+    }
+}
+
+/// The conformal part `[p −q; q p]` of `A` (p = (a+d)/2, q = (c−b)/2), or `scale·I` when that
+/// part vanishes: the nearest similarity, which always has positive determinant.
+fn orientation_preserving_similarity(a: &[f64; 4], scale: f64) -> [f64; 4] {
+    let p = 0.5 * (a[0] + a[3]);
+    let q = 0.5 * (a[2] - a[1]);
+    let n = (p * p + q * q).sqrt();
+    if n > 1e-6 * scale && n.is_finite() {
+        [p, -q, q, p]
+    } else {
+        [scale, 0.0, 0.0, scale]
+    }
+}

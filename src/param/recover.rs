@@ -1,0 +1,140 @@
+//! Recovering per-vertex UVs from per-face Jacobians.
+//!
+//! Least squares (the default): `min_u Σ_f area_f ‖J_f(u) − A_f‖²`, a Poisson problem whose
+//! matrix (the cotangent Laplacian) depends only on the mesh, so it is assembled once and every
+//! recovery is two warm-started PCG solves. It spreads the consensus error of the per-face maps
+//! over the whole mesh instead of accumulating it along a tree, which is why it stays flip-free
+//! long before the breadth-first recovery does (see ../shared/notes/admm-prototype.md).
+
+use sprs::{CsMat, TriMat};
+
+use crate::linalg::cg::{pcg, CgOptions, Preconditioner};
+use crate::linalg::SolveError;
+use crate::param::admm::AdmmProblem;
+
+/// Precomputed Poisson system for least-squares recovery.
+pub struct LeastSquaresRecovery {
+    /// Free-vertex index → vertex (referenced vertices except the pinned one).
+    free: Vec<u32>,
+    /// Vertex → free index, or `u32::MAX` for pinned / unreferenced vertices.
+    index: Vec<u32>,
+    /// The pinned vertex (fixes the translation).
+    pinned: u32,
+    laplacian: CsMat<f64>,
+    /// #F×3 gradients of the corner hat functions in the face's frame.
+    grads: Vec<[[f64; 2]; 3]>,
+    /// #F face areas.
+    areas: Vec<f64>,
+    faces: Vec<[u32; 3]>,
+}
+
+impl LeastSquaresRecovery {
+    /// Assembles the cotangent Laplacian over the referenced vertices of `faces`.
+    pub fn new(
+        problem: &AdmmProblem,
+        faces: &[[u32; 3]],
+        n_vertices: usize,
+    ) -> LeastSquaresRecovery {
+        let mut used = vec![false; n_vertices];
+        for f in faces {
+            for &v in f {
+                used[v as usize] = true;
+            }
+        }
+        let pinned = faces.first().map_or(0, |f| f[0]);
+        let mut index = vec![u32::MAX; n_vertices];
+        let mut free = Vec::new();
+        for v in 0..n_vertices {
+            if used[v] && v as u32 != pinned {
+                index[v] = free.len() as u32;
+                free.push(v as u32);
+            }
+        }
+        let mut grads = Vec::with_capacity(faces.len());
+        let mut tri = TriMat::new((free.len(), free.len()));
+        for (f, face) in faces.iter().enumerate() {
+            let l = &problem.local[f];
+            let (m00, m01, m10, m11) = (
+                l[1][0] - l[0][0],
+                l[2][0] - l[0][0],
+                l[1][1] - l[0][1],
+                l[2][1] - l[0][1],
+            );
+            let det = m00 * m11 - m01 * m10;
+            // Hat-function gradients: g1 = M⁻ᵀ(1,0), g2 = M⁻ᵀ(0,1), g0 = −g1 − g2.
+            let g1 = [m11 / det, -m01 / det];
+            let g2 = [-m10 / det, m00 / det];
+            let g0 = [-g1[0] - g2[0], -g1[1] - g2[1]];
+            let g = [g0, g1, g2];
+            let area = problem.area[f];
+            for i in 0..3 {
+                let vi = index[face[i] as usize];
+                if vi == u32::MAX {
+                    continue;
+                }
+                for j in 0..3 {
+                    let vj = index[face[j] as usize];
+                    if vj == u32::MAX {
+                        continue;
+                    }
+                    tri.add_triplet(
+                        vi as usize,
+                        vj as usize,
+                        area * (g[i][0] * g[j][0] + g[i][1] * g[j][1]),
+                    );
+                }
+            }
+            grads.push(g);
+        }
+        LeastSquaresRecovery {
+            free,
+            index,
+            pinned,
+            laplacian: tri.to_csr(),
+            grads,
+            areas: problem.area.clone(),
+            faces: faces.to_vec(),
+        }
+    }
+
+    /// Recovers UVs from the Jacobians `a` (#F, row-major 2x2). `uv` (#V) is the warm start and
+    /// is overwritten for referenced vertices; the pinned vertex keeps its value.
+    pub fn recover(&self, a: &[[f64; 4]], uv: &mut [[f64; 2]]) -> Result<(), SolveError> {
+        let n = self.free.len();
+        let pin = uv[self.pinned as usize];
+        for r in 0..2 {
+            // b_i = Σ_f area_f g_i · (row r of A_f), minus the pinned vertex's column.
+            let mut b = vec![0.0; n];
+            for (f, face) in self.faces.iter().enumerate() {
+                let row = [a[f][2 * r], a[f][2 * r + 1]];
+                let g = &self.grads[f];
+                let area = self.areas[f];
+                for i in 0..3 {
+                    let vi = self.index[face[i] as usize];
+                    if vi == u32::MAX {
+                        continue;
+                    }
+                    b[vi as usize] += area * (g[i][0] * row[0] + g[i][1] * row[1]);
+                    for j in 0..3 {
+                        if face[j] == self.pinned {
+                            // Move K_{i,pin} · u_pin to the right-hand side.
+                            b[vi as usize] -=
+                                area * (g[i][0] * g[j][0] + g[i][1] * g[j][1]) * pin[r];
+                        }
+                    }
+                }
+            }
+            let mut x: Vec<f64> = self.free.iter().map(|&v| uv[v as usize][r]).collect();
+            let opts = CgOptions {
+                tolerance: 1e-10,
+                max_iterations: 20 * n.max(100),
+                preconditioner: Preconditioner::Ic0,
+            };
+            pcg(&self.laplacian, &b, &mut x, &opts)?;
+            for (k, &v) in self.free.iter().enumerate() {
+                uv[v as usize][r] = x[k];
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,273 @@
+//! The one-call jobs behind the CLI (`foldfree param`, `foldfree stats`), usable by any host:
+//! the CLI only parses arguments, prints, and maps errors to exit codes.
+#![forbid(unsafe_code)]
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::init::tutte::{tutte, TutteWeights};
+use crate::mesh::{self, Topology, TriMesh};
+use crate::metrics;
+use crate::param::admm::{self, AdmmOptions, AdmmProblem, History};
+use crate::param::Energy;
+use crate::report::ParamReport;
+use crate::{Error, Result};
+
+/// Which start map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InitMethod {
+    /// Tutte embedding (uniform or mean-value weights): flip-free, high distortion.
+    Tutte(TutteWeights),
+    /// Least-squares conformal map: near-optimal for MIPS, may flip a few faces (ADMM repairs).
+    Lscm,
+}
+
+/// Which solver runs after the start map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolverChoice {
+    /// Output the start map as is.
+    None,
+    /// ADMM on the chosen backend.
+    Admm,
+}
+
+/// Where ADMM runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendChoice {
+    /// Vulkan on a real GPU; the CPU backend when the only device is a CPU rasterizer or none.
+    Auto,
+    Cpu,
+    Vulkan,
+}
+
+/// Everything `foldfree param` needs.
+#[derive(Clone, Debug)]
+pub struct ParamJob {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub init: InitMethod,
+    pub solver: SolverChoice,
+    pub backend: BackendChoice,
+    /// Vulkan device name substring or index.
+    pub device: Option<String>,
+    pub validation: bool,
+    pub admm: AdmmOptions,
+    pub validate: mesh::validate::ValidateOptions,
+}
+
+impl ParamJob {
+    /// A job with the documented defaults: LSCM start, ADMM (MIPS), automatic backend.
+    pub fn new(input: impl Into<PathBuf>, output: impl Into<PathBuf>) -> ParamJob {
+        ParamJob {
+            input: input.into(),
+            output: output.into(),
+            init: InitMethod::Lscm,
+            solver: SolverChoice::Admm,
+            backend: BackendChoice::Auto,
+            device: None,
+            validation: false,
+            admm: AdmmOptions::default(),
+            validate: mesh::validate::ValidateOptions::default(),
+        }
+    }
+}
+
+/// Output of [`run_param`]: the map and its report (already written to `job.output`).
+pub struct ParamOutput {
+    pub mesh: TriMesh,
+    pub uv: Vec<[f64; 2]>,
+    pub report: ParamReport,
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
+/// The start map of a disk mesh.
+pub fn initial_map(mesh: &TriMesh, topo: &Topology, init: InitMethod) -> Result<Vec<[f64; 2]>> {
+    let boundary = topo
+        .boundary_loops
+        .first()
+        .ok_or_else(|| Error::Usage("the mesh has no boundary loop".into()))?;
+    let uv = match init {
+        InitMethod::Tutte(w) => tutte(&mesh.positions, &mesh.faces, boundary, w)?,
+        InitMethod::Lscm => crate::init::lscm::lscm(&mesh.positions, &mesh.faces, boundary)?,
+    };
+    Ok(uv)
+}
+
+/// Scales `uv` about its centroid so its total |area| equals the 3D area: Jacobians are then
+/// O(1), which keeps the device's f32 arithmetic well inside its range.
+pub fn normalize_area(mesh: &TriMesh, uv: &mut [[f64; 2]], area_3d: f64) {
+    let a = crate::init::total_signed_area(&mesh.faces, uv).abs();
+    if !(a > 0.0 && a.is_finite() && area_3d > 0.0) {
+        return;
+    }
+    let s = (area_3d / a).sqrt();
+    let n = uv.len().max(1) as f64;
+    let c = uv
+        .iter()
+        .fold([0.0, 0.0], |acc, p| [acc[0] + p[0] / n, acc[1] + p[1] / n]);
+    for p in uv.iter_mut() {
+        *p = [(p[0] - c[0]) * s, (p[1] - c[1]) * s];
+    }
+}
+
+/// Opens a Vulkan context for `job`, or says why the CPU backend runs instead.
+fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
+    use crate::gpu::{Context, ContextDesc};
+    let desc = ContextDesc {
+        validation: job.validation,
+        device: job.device.clone(),
+        ..ContextDesc::default()
+    };
+    match job.backend {
+        BackendChoice::Cpu => Ok(None),
+        BackendChoice::Vulkan => Ok(Some(Context::new(&desc)?)),
+        BackendChoice::Auto => match Context::new(&desc) {
+            // A CPU "GPU" (lavapipe) is slower than the native f64 backend on the same cores.
+            Ok(ctx) if ctx.device_type() == crate::gpu::vk::PhysicalDeviceType::CPU => Ok(None),
+            Ok(ctx) => Ok(Some(ctx)),
+            Err(e) if e.is_unavailable() => Ok(None),
+            Err(e) => Err(e.into()),
+        },
+    }
+}
+
+/// `foldfree param`: load and validate, start map, solve, recover, measure, write the OBJ
+/// (atomically; never over the input). `progress` sees every residual check.
+pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<ParamOutput> {
+    let t0 = Instant::now();
+    if same_file(&job.input, &job.output) {
+        return Err(Error::Usage(format!(
+            "refusing to overwrite the input {}",
+            job.input.display()
+        )));
+    }
+    let (mesh, topo, vreport) = mesh::load(&job.input, &job.validate)?;
+    topo.require_disk(&job.input)?;
+    let t_load = t0.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let frames = mesh::frames::compute(&mesh);
+    let area_3d: f64 = frames.area.iter().sum();
+    let mut uv = initial_map(&mesh, &topo, job.init)?;
+    normalize_area(&mesh, &mut uv, area_3d);
+    let init_flips = crate::init::count_flips(&mesh.faces, &uv);
+    let t_init = t1.elapsed().as_secs_f64();
+
+    let t2 = Instant::now();
+    let mut report = ParamReport {
+        init: match job.init {
+            InitMethod::Tutte(TutteWeights::Uniform) => "tutte".into(),
+            InitMethod::Tutte(TutteWeights::MeanValue) => "tutte_mean_value".into(),
+            InitMethod::Lscm => "lscm".into(),
+        },
+        init_flips,
+        backend: "cpu".into(),
+        device: "host CPU".into(),
+        solver: "none".into(),
+        ..ParamReport::default()
+    };
+    if job.solver == SolverChoice::Admm {
+        let problem = AdmmProblem::new(&mesh, &topo, &frames);
+        let ctx = choose_backend(job)?;
+        let result = match &ctx {
+            Some(ctx) => {
+                let mut exec = admm::vulkan::VulkanExecutor::new(
+                    ctx,
+                    &problem,
+                    job.admm.energy,
+                    job.admm.newton_iters,
+                    false,
+                )?;
+                let r = admm::solve(&problem, &mesh.faces, &uv, &job.admm, &mut exec, progress)?;
+                let messages = ctx.take_validation_messages();
+                if !messages.is_empty() {
+                    return Err(crate::gpu::GpuError::Invalid(format!(
+                        "{} Vulkan validation messages, first: {}",
+                        messages.len(),
+                        messages[0]
+                    ))
+                    .into());
+                }
+                r
+            }
+            None => {
+                let mut exec =
+                    admm::cpu::CpuExecutor::new(&problem, job.admm.energy, job.admm.newton_iters);
+                admm::solve(&problem, &mesh.faces, &uv, &job.admm, &mut exec, progress)?
+            }
+        };
+        uv = result.uv;
+        report.backend = result.backend.into();
+        report.device = result.device;
+        report.solver = "admm".into();
+        report.energy = Some(
+            match job.admm.energy {
+                Energy::Mips => "mips",
+                Energy::SymmetricDirichlet => "sd",
+            }
+            .into(),
+        );
+        report.iterations = result.iterations;
+        report.converged = Some(result.converged);
+        report.mu_rel = Some(result.mu_rel_final);
+        report.history = result.history;
+    }
+    let t_solve = t2.elapsed().as_secs_f64();
+
+    let m = metrics::evaluate(&mesh.positions, &mesh.faces, &uv, &topo.boundary_loops);
+    if m.flips > 0 {
+        return Err(crate::linalg::SolveError::Failed {
+            what: format!(
+                "the map has {} flipped faces (start map: {} flips); nothing was written",
+                m.flips, init_flips
+            ),
+        }
+        .into());
+    }
+    if uv.iter().any(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        return Err(crate::linalg::SolveError::NonFinite {
+            what: "UV coordinates".into(),
+        }
+        .into());
+    }
+    mesh::obj::write_obj_with_uv(&job.output, &mesh, &uv).map_err(|source| Error::Io {
+        path: job.output.clone(),
+        source,
+    })?;
+
+    report.input = job.input.display().to_string();
+    report.output = job.output.display().to_string();
+    report.vertices = mesh.positions.len();
+    report.faces = mesh.faces.len();
+    report.interior_edges = topo.interior_edges.len();
+    report.boundary_loops = topo.boundary_loops.len();
+    report.unreferenced_vertices = vreport.unreferenced_vertices.len();
+    report.flips = m.flips;
+    report.delta_con_mean = m.delta_con_mean;
+    report.delta_con_area_mean = m.delta_con_area_mean;
+    report.delta_con_max = m.delta_con_max;
+    report.mips_energy = m.mips_energy;
+    report.sd_energy = m.sd_energy;
+    report.boundary_self_intersections = m.boundary_self_intersections;
+    report.seconds_load = t_load;
+    report.seconds_init = t_init;
+    report.seconds_solve = t_solve;
+    report.seconds = t0.elapsed().as_secs_f64();
+    Ok(ParamOutput { mesh, uv, report })
+}
+
+/// Writes `report` as pretty JSON, atomically.
+pub fn write_report(path: &Path, report: &ParamReport) -> Result<()> {
+    let text =
+        serde_json::to_string_pretty(report).map_err(|e| Error::Usage(format!("report: {e}")))?;
+    mesh::obj::write_atomic(path, text.as_bytes()).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
