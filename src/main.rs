@@ -101,6 +101,18 @@ struct ParamArgs {
     /// Keep μ fixed.
     #[arg(long)]
     fixed_mu: bool,
+    /// Relative primal residual tolerance ‖Y − AS‖/‖AS‖.
+    #[arg(long)]
+    tol_primal: Option<f64>,
+    /// Relative dual residual tolerance ‖ΔA S‖/‖AS‖.
+    #[arg(long)]
+    tol_dual: Option<f64>,
+    /// Relative energy change tolerance between checks.
+    #[arg(long)]
+    tol_energy: Option<f64>,
+    /// Newton steps per face per iteration.
+    #[arg(long)]
+    newton_iters: Option<u32>,
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -201,6 +213,18 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         admm.resync_every = r;
     }
     admm.adaptive_mu = !args.fixed_mu;
+    if let Some(t) = args.tol_primal {
+        admm.tol_primal = t;
+    }
+    if let Some(t) = args.tol_dual {
+        admm.tol_dual = t;
+    }
+    if let Some(t) = args.tol_energy {
+        admm.tol_energy = t;
+    }
+    if let Some(n) = args.newton_iters {
+        admm.newton_iters = n;
+    }
     admm.stop = Some(stop);
     let mut job = ParamJob::new(&args.input, &args.output);
     job.init = init;

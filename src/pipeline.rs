@@ -174,6 +174,15 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     };
     if job.solver == SolverChoice::Admm {
         let problem = AdmmProblem::new(&mesh, &topo, &frames);
+        // A start map with flips (LSCM can fold) gets a flip-free safety net: never output a
+        // flipped map because the solver could not unfold one.
+        let fallback = if init_flips > 0 {
+            let mut t = initial_map(&mesh, &topo, InitMethod::Tutte(TutteWeights::Uniform))?;
+            normalize_area(&mesh, &mut t, area_3d);
+            Some(t)
+        } else {
+            None
+        };
         let ctx = choose_backend(job)?;
         let result = match &ctx {
             Some(ctx) => {
@@ -184,7 +193,15 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
                     job.admm.newton_iters,
                     false,
                 )?;
-                let r = admm::solve(&problem, &mesh.faces, &uv, &job.admm, &mut exec, progress)?;
+                let r = admm::solve(
+                    &problem,
+                    &mesh.faces,
+                    &uv,
+                    fallback.as_deref(),
+                    &job.admm,
+                    &mut exec,
+                    progress,
+                )?;
                 let messages = ctx.take_validation_messages();
                 if !messages.is_empty() {
                     return Err(crate::gpu::GpuError::Invalid(format!(
@@ -199,7 +216,15 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
             None => {
                 let mut exec =
                     admm::cpu::CpuExecutor::new(&problem, job.admm.energy, job.admm.newton_iters);
-                admm::solve(&problem, &mesh.faces, &uv, &job.admm, &mut exec, progress)?
+                admm::solve(
+                    &problem,
+                    &mesh.faces,
+                    &uv,
+                    fallback.as_deref(),
+                    &job.admm,
+                    &mut exec,
+                    progress,
+                )?
             }
         };
         uv = result.uv;

@@ -5,9 +5,11 @@
 // Bindings: 0 A vec4[F], 1 Y vec4[S] (written), 2 Λ vec4[S], 3 slot_face uint[S], 4 slot_dir vec2[S].
 // One thread per interior edge, workgroups of 64.
 #extension GL_GOOGLE_include_directive : require
+// The layout must precede grid.glsl: glslang bakes gl_WorkGroupSize into global_index()
+// where it is defined.
+layout(local_size_x = 64) in;
 #include "grid.glsl"
 
-layout(local_size_x = 64) in;
 layout(std430, set = 0, binding = 0) readonly buffer Abuf { vec4 A[]; };
 layout(std430, set = 0, binding = 1) writeonly buffer Ybuf { vec4 Y[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Lbuf { vec4 L[]; };

@@ -6,10 +6,12 @@
 // Bindings: 0 A vec4[F], 1 Y vec4[S], 2 A_prev vec4[F], 3 slot_face uint[S], 4 weight float[F],
 //           5 partials vec4[#groups] (written). Workgroups of 64 (the tree assumes it).
 #extension GL_GOOGLE_include_directive : require
+// The layout must precede grid.glsl: glslang bakes gl_WorkGroupSize into global_index()
+// where it is defined.
+layout(local_size_x = 64) in;
 #include "grid.glsl"
 #include "admm.glsl"
 
-layout(local_size_x = 64) in;
 layout(std430, set = 0, binding = 0) readonly buffer Abuf { vec4 A[]; };
 layout(std430, set = 0, binding = 1) readonly buffer Ybuf { vec4 Y[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Aprev { vec4 A_prev[]; };

@@ -23,41 +23,81 @@ float energy_value(uint kind, vec4 a) {
     return s + s * id * id;
 }
 
-// Value, gradient and Hessian (row-major 4x4 over (a, b, c, d)); only for det > 0.
-// MIPS: H = 2I/D − 2(x∇Dᵀ + ∇D xᵀ)/D² − s H_D/D² + 2s ∇D∇Dᵀ/D³.
-// SD:   H = 2I(1 + 1/D²) − 4(x∇Dᵀ + ∇D xᵀ)/D³ − 2s H_D/D³ + 6s ∇D∇Dᵀ/D⁴.
-// Powers of 1/D instead of D: D⁴ underflows f32 long before 1/D⁴ overflows.
-void energy_eval(uint kind, vec4 a, out float e, out vec4 g, out float h[16]) {
+// Value and gradient; only for det > 0.
+// MIPS: ∇E = 2x/D − s∇D/D²;  SD: ∇E = 2x + 2x/D² − 2s∇D/D³.
+void energy_grad(uint kind, vec4 a, out float e, out vec4 g) {
     float d = det2(a);
     float s = dot(a, a);
     vec4 gd = grad_det(a);
     float id = 1.0 / d;
     float id2 = id * id;
-    float cdiag, cmix, chd, cgg;
     if (kind == ENERGY_MIPS) {
         e = s * id;
         g = 2.0 * a * id - s * gd * id2;
-        cdiag = 2.0 * id;
-        cmix = 2.0 * id2;
-        chd = s * id2;
-        cgg = 2.0 * s * id2 * id;
     } else {
         e = s + s * id2;
         g = 2.0 * a + 2.0 * a * id2 - 2.0 * s * gd * id2 * id;
-        cdiag = 2.0 + 2.0 * id2;
-        cmix = 4.0 * id2 * id;
-        chd = 2.0 * s * id2 * id;
-        cgg = 6.0 * s * id2 * id2;
     }
-    for (int i = 0; i < 4; ++i) {
-        for (int j = 0; j < 4; ++j) {
-            float hdij = 0.0;
-            if ((i == 0 && j == 3) || (i == 3 && j == 0)) hdij = 1.0;
-            if ((i == 1 && j == 2) || (i == 2 && j == 1)) hdij = -1.0;
-            h[i * 4 + j] = (i == j ? cdiag : 0.0) - cmix * (a[i] * gd[j] + gd[i] * a[j]) - chd * hdij
-                + cgg * gd[i] * gd[j];
-        }
+}
+
+// atan(y, x) is undefined in GLSL at (0, 0); the angle there is arbitrary, so pick 0.
+float atan2_safe(float y, float x) {
+    return (x == 0.0 && y == 0.0) ? 0.0 : atan(y, x);
+}
+
+// U X Vᵀ for U = rot(φ), Vᵀ = rot(θ) given as (cos, sin); row-major vec4.
+vec4 rotate2(vec2 u, vec4 x, vec2 vt) {
+    vec4 ux = vec4(u.x * x.x - u.y * x.z, u.x * x.y - u.y * x.w, u.y * x.x + u.x * x.z, u.y * x.y + u.x * x.w);
+    return vec4(ux.x * vt.x + ux.y * vt.y, -ux.x * vt.y + ux.y * vt.x, ux.z * vt.x + ux.w * vt.y,
+                -ux.z * vt.y + ux.w * vt.x);
+}
+
+// Closed-form Hessian eigensystem (Smith, de Goes & Kim 2019, 2D): A = U diag(σ1, σ2) Vᵀ;
+// twist U[0 −1; 1 0]Vᵀ/√2, flip U[0 1; 1 0]Vᵀ/√2, two scaling modes U diag(c)Vᵀ.
+// CPU twin: kernels::hessian_eigensystem.
+void hessian_eigensystem(uint kind, vec4 a, out vec4 lam, out vec4 modes[4]) {
+    float e = 0.5 * (a.x + a.w);
+    float f = 0.5 * (a.x - a.w);
+    float g = 0.5 * (a.z + a.y);
+    float h = 0.5 * (a.z - a.y);
+    float q = length(vec2(e, h));
+    float r = length(vec2(f, g));
+    float a1 = atan2_safe(g, f);
+    float a2 = atan2_safe(h, e);
+    float theta = 0.5 * (a2 - a1);
+    float phi = 0.5 * (a2 + a1);
+    vec2 u = vec2(cos(phi), sin(phi));
+    vec2 vt = vec2(cos(theta), sin(theta));
+    float s1 = q + r;
+    float s2 = q - r;
+    float p12 = s1 * s2;
+    float twist, flip, h11, h22, h12;
+    if (kind == ENERGY_MIPS) {
+        float d = 1.0 / (p12 * p12);
+        twist = -(s1 - s2) * (s1 - s2) * d;
+        flip = (s1 + s2) * (s1 + s2) * d;
+        h11 = 2.0 * s2 / (s1 * s1 * s1);
+        h22 = 2.0 * s1 / (s2 * s2 * s2);
+        h12 = -(s1 * s1 + s2 * s2) * d;
+    } else {
+        float p3 = 1.0 / (p12 * p12 * p12);
+        twist = 2.0 - 2.0 * (s1 * s1 - p12 + s2 * s2) * p3;
+        flip = 2.0 + 2.0 * (s1 * s1 + p12 + s2 * s2) * p3;
+        h11 = 2.0 + 6.0 / (s1 * s1 * s1 * s1);
+        h22 = 2.0 + 6.0 / (s2 * s2 * s2 * s2);
+        h12 = 0.0;
     }
+    float psi = 0.5 * atan2_safe(2.0 * h12, h11 - h22);
+    float c = cos(psi);
+    float s = sin(psi);
+    float l1 = h11 * c * c + 2.0 * h12 * s * c + h22 * s * s;
+    float l2 = h11 * s * s - 2.0 * h12 * s * c + h22 * c * c;
+    const float R = 0.70710678118654752;
+    lam = vec4(twist, flip, l1, l2);
+    modes[0] = rotate2(u, vec4(0.0, -R, R, 0.0), vt);
+    modes[1] = rotate2(u, vec4(0.0, R, R, 0.0), vt);
+    modes[2] = rotate2(u, vec4(c, 0.0, 0.0, s), vt);
+    modes[3] = rotate2(u, vec4(-s, 0.0, 0.0, c), vt);
 }
 
 // Smallest positive root of c2 t² + c1 t + c0 (∞ if none), without cancellation.

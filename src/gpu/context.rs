@@ -842,6 +842,51 @@ mod tests {
             .contains(&ash::khr::synchronization2::NAME));
     }
 
+    /// A context borrowing another's device works, and dropping it destroys nothing it does
+    /// not own (the owner stays usable and validation stays silent).
+    #[test]
+    fn from_host_borrows_and_destroys_nothing() {
+        let desc = ContextDesc {
+            validation: true,
+            ..ContextDesc::default()
+        };
+        let owner = match Context::new(&desc) {
+            Ok(ctx) => ctx,
+            Err(e) if std::env::var("REQUIRE_VULKAN").is_ok_and(|v| v == "1") => {
+                panic!("REQUIRE_VULKAN=1 but Vulkan is unavailable: {e}")
+            }
+            Err(e) => {
+                eprintln!("skipped: no Vulkan ({e})");
+                return;
+            }
+        };
+        let host = HostDesc {
+            entry: owner.shared._entry.clone(),
+            instance: owner.shared.instance.clone(),
+            physical_device: owner.physical_device(),
+            device: owner.shared.device.clone(),
+            queue_family_index: owner.queue_family_index(),
+            queue: *owner.queue(),
+            debug_utils: true,
+        };
+        // SAFETY: the handles come from `owner`, which outlives `borrowed`, was created with
+        // `required_features()`, and this single-threaded test never submits from both at once.
+        let borrowed = unsafe { Context::from_host(host) }.expect("from_host");
+        assert_eq!(borrowed.device_name(), owner.device_name());
+        let data: Vec<u32> = (0..1000).collect();
+        let b = super::super::Buffer::from_slice(&borrowed, "host.data", &data).expect("buffer");
+        assert_eq!(b.download_staged::<u32>().expect("read"), data);
+        drop(b);
+        drop(borrowed);
+        let c = super::super::Buffer::from_slice(&owner, "owner.data", &data).expect("buffer");
+        assert_eq!(c.download_staged::<u32>().expect("read"), data);
+        drop(c);
+        assert_eq!(owner.validation_messages(), Vec::<String>::new());
+        let log = owner.message_log();
+        drop(owner);
+        assert_eq!(log.messages(), Vec::<String>::new());
+    }
+
     #[test]
     fn c_name_drops_interior_nul() {
         assert_eq!(c_name("a\0b").to_str().ok(), Some("a b"));

@@ -13,6 +13,11 @@
 //! - [`TimestampPool`]: GPU timestamps for per-kernel timings.
 //! - [`shaders`]: the SPIR-V compiled from `glsl/` by `build.rs`.
 
+// The unsafe discipline, checked by clippy: one unsafe operation per block, each with a
+// `// SAFETY:` comment.
+#![deny(clippy::undocumented_unsafe_blocks)]
+#![deny(clippy::multiple_unsafe_ops_per_block)]
+
 mod buffer;
 mod command;
 mod context;

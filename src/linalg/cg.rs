@@ -35,6 +35,12 @@ pub enum Preconditioner {
     /// (M = LU) in [`bicgstab`]. Falls back to a shifted factorisation, then to Jacobi, on
     /// breakdown; [`CgStats::preconditioner`] reports what was used.
     Ic0,
+    /// Smoothed-aggregation algebraic multigrid V-cycle (Vaněk, Mandel & Brezina 1996), for
+    /// Laplacian-like systems (Tutte, LSCM, Poisson recovery): the iteration count barely grows
+    /// with the mesh size, where IC(0)'s grows like √n. `block_size` unknowns per mesh vertex
+    /// are aggregated together and keep separate coarse unknowns (2 for an interleaved u, v
+    /// system). Falls back to IC(0)/ILU(0), then Jacobi, if the hierarchy cannot be built.
+    Amg { block_size: usize },
 }
 
 /// Options of a Krylov solve.
@@ -154,11 +160,14 @@ fn residual(a: &Csr, b: &[f64], x: &[f64], r: &mut [f64]) -> f64 {
     norm(r)
 }
 
-/// Incomplete Cholesky IC(0): lower-triangular L with the pattern of tril(A), A ≈ LLᵀ.
+/// Incomplete Cholesky IC(0) with the pattern of tril(A), A ≈ LLᵀ.
+///
+/// Right-looking on the lower triangle stored by columns: column k of tril(A) is row k of
+/// triu(A), so the CSR rows of a symmetric A give it without a transpose.
 struct Ic0 {
-    indptr: Vec<usize>,
-    indices: Vec<usize>,
-    /// Row i holds its off-diagonal entries (ascending columns) followed by the diagonal.
+    colptr: Vec<usize>,
+    /// Row indices per column, ascending; the first entry of each column is the diagonal.
+    rows: Vec<usize>,
     values: Vec<f64>,
 }
 
@@ -166,78 +175,77 @@ impl Ic0 {
     /// Factorises A + shift·diag(A); `None` on a non-positive or non-finite pivot.
     fn factor(a: &Csr, shift: f64) -> Option<Ic0> {
         let n = a.n;
-        let mut indptr = Vec::with_capacity(n + 1);
-        let mut indices = Vec::new();
+        let mut colptr = Vec::with_capacity(n + 1);
+        let mut rows = Vec::new();
         let mut values = Vec::new();
-        indptr.push(0);
-        for i in 0..n {
-            let start = indices.len();
-            let (cols, vals) = a.row(i);
-            let mut diag = None;
-            for (&j, &v) in cols.iter().zip(vals) {
-                if j < i {
-                    indices.push(j);
-                    values.push(v);
-                } else if j == i {
-                    diag = Some(v * (1.0 + shift));
-                }
+        let mut orig_diag = Vec::with_capacity(n);
+        colptr.push(0);
+        for k in 0..n {
+            let (cols, vals) = a.row(k);
+            let first = cols.partition_point(|&j| j < k);
+            if cols.get(first) != Some(&k) {
+                return None; // no diagonal entry
             }
-            let diag = diag?;
-            // l_ik = (a_ik − Σ_{m<k} l_im·l_km) / l_kk for the pattern entries k < i, in order.
-            for p in start..indices.len() {
-                let k = indices[p];
-                let (ks, ke) = (indptr[k], indptr[k + 1] - 1); // row k without its diagonal
-                let mut s = values[p];
-                let (mut pi, mut pk) = (start, ks);
-                while pi < p && pk < ke {
-                    let (ci, ck) = (indices[pi], indices[pk]);
-                    if ci == ck {
-                        s -= values[pi] * values[pk];
-                        pi += 1;
-                        pk += 1;
-                    } else if ci < ck {
-                        pi += 1;
-                    } else {
-                        pk += 1;
-                    }
-                }
-                values[p] = s / values[indptr[k + 1] - 1];
-            }
-            // l_ii = √(a_ii − Σ_k l_ik²)
-            let d = diag - values[start..].iter().map(|v| v * v).sum::<f64>();
-            let positive = d.is_finite() && d > 1e-14 * diag.abs();
+            orig_diag.push(vals[first]);
+            rows.push(k);
+            values.push(vals[first] * (1.0 + shift));
+            rows.extend_from_slice(&cols[first + 1..]);
+            values.extend_from_slice(&vals[first + 1..]);
+            colptr.push(rows.len());
+        }
+        for k in 0..n {
+            let (s, e) = (colptr[k], colptr[k + 1]);
+            let d = values[s];
+            let positive = d.is_finite() && d > 1e-12 * orig_diag[k].abs();
             if !positive {
                 return None;
             }
-            indices.push(i);
-            values.push(d.sqrt());
-            indptr.push(indices.len());
+            // l_kk = √d_k; l_ik = a_ik / l_kk
+            let lkk = d.sqrt();
+            values[s] = lkk;
+            for p in s + 1..e {
+                values[p] /= lkk;
+            }
+            // Schur update of the trailing matrix on the pattern: a_ij −= l_ik·l_jk.
+            for q in s + 1..e {
+                let (j, ljk) = (rows[q], values[q]);
+                values[colptr[j]] -= ljk * ljk;
+                for p in q + 1..e {
+                    let (i, lik) = (rows[p], values[p]);
+                    let (cs, ce) = (colptr[j] + 1, colptr[j + 1]);
+                    if let Ok(pos) = rows[cs..ce].binary_search(&i) {
+                        values[cs + pos] -= lik * ljk;
+                    }
+                }
+            }
         }
         Some(Ic0 {
-            indptr,
-            indices,
+            colptr,
+            rows,
             values,
         })
     }
 
-    /// z = (LLᵀ)⁻¹ r: forward substitution with L, then backward with Lᵀ (column-oriented).
+    /// z = (LLᵀ)⁻¹ r: L y = r column by column, then Lᵀ z = y row by row (row k of Lᵀ is
+    /// column k of L).
     fn apply(&self, r: &[f64], z: &mut [f64]) {
         let n = r.len();
-        for i in 0..n {
-            let (s, e) = (self.indptr[i], self.indptr[i + 1] - 1);
-            let mut acc = r[i];
-            for p in s..e {
-                acc -= self.values[p] * z[self.indices[p]];
+        z.copy_from_slice(r);
+        for k in 0..n {
+            let (s, e) = (self.colptr[k], self.colptr[k + 1]);
+            let yk = z[k] / self.values[s];
+            z[k] = yk;
+            for p in s + 1..e {
+                z[self.rows[p]] -= self.values[p] * yk;
             }
-            z[i] = acc / self.values[e];
         }
-        for i in (0..n).rev() {
-            let (s, e) = (self.indptr[i], self.indptr[i + 1] - 1);
-            let zi = z[i] / self.values[e];
-            z[i] = zi;
-            for p in s..e {
-                z[self.indices[p]] -= self.values[p] * zi;
+        for k in (0..n).rev() {
+            let (s, e) = (self.colptr[k], self.colptr[k + 1]);
+            let mut acc = z[k];
+            for p in s + 1..e {
+                acc -= self.values[p] * z[self.rows[p]];
             }
+            z[k] = acc / self.values[s];
         }
     }
 }
@@ -317,6 +325,7 @@ enum Precond<'a> {
     Jacobi(Vec<f64>),
     Ic0(Ic0),
     Ilu0(Ilu0<'a>),
+    Amg(Amg),
 }
 
 impl Precond<'_> {
@@ -330,8 +339,401 @@ impl Precond<'_> {
             }
             Precond::Ic0(f) => f.apply(r, z),
             Precond::Ilu0(f) => f.apply(r, z),
+            Precond::Amg(m) => m.apply(r, z),
         }
     }
+}
+
+/// An owned CSR matrix (rows × cols): the levels of the multigrid hierarchy.
+struct Mat {
+    rows: usize,
+    cols: usize,
+    indptr: Vec<usize>,
+    indices: Vec<usize>,
+    data: Vec<f64>,
+}
+
+impl Mat {
+    fn from_csr(a: &Csr) -> Mat {
+        Mat { rows: a.n, cols: a.n, indptr: a.indptr.to_vec(), indices: a.indices.to_vec(), data: a.data.to_vec() }
+    }
+
+    #[inline]
+    fn row(&self, i: usize) -> (&[usize], &[f64]) {
+        let (s, e) = (self.indptr[i], self.indptr[i + 1]);
+        (&self.indices[s..e], &self.data[s..e])
+    }
+
+    /// y = A·x, parallel over rows when the matrix is large.
+    fn spmv(&self, x: &[f64], y: &mut [f64]) {
+        let row_dot = |i: usize| -> f64 {
+            let (cols, vals) = self.row(i);
+            cols.iter().zip(vals).map(|(&j, &v)| v * x[j]).sum()
+        };
+        if self.rows >= PARALLEL_ROWS {
+            y.par_iter_mut().enumerate().with_min_len(4096).for_each(|(i, yi)| *yi = row_dot(i));
+        } else {
+            for (i, yi) in y.iter_mut().enumerate() {
+                *yi = row_dot(i);
+            }
+        }
+    }
+
+    /// Aᵀ (count → prefix sum → fill; rows come out sorted).
+    fn transpose(&self) -> Mat {
+        let mut indptr = vec![0usize; self.cols + 1];
+        for &j in &self.indices {
+            indptr[j + 1] += 1;
+        }
+        for j in 0..self.cols {
+            indptr[j + 1] += indptr[j];
+        }
+        let mut fill = indptr.clone();
+        let mut indices = vec![0usize; self.indices.len()];
+        let mut data = vec![0.0; self.data.len()];
+        for i in 0..self.rows {
+            let (cols, vals) = self.row(i);
+            for (&j, &v) in cols.iter().zip(vals) {
+                indices[fill[j]] = i;
+                data[fill[j]] = v;
+                fill[j] += 1;
+            }
+        }
+        Mat { rows: self.cols, cols: self.rows, indptr, indices, data }
+    }
+
+    /// A·B by rows with a dense accumulator (Gustavson 1978); rows come out sorted.
+    fn mul(&self, b: &Mat) -> Mat {
+        let mut indptr = Vec::with_capacity(self.rows + 1);
+        let mut indices = Vec::new();
+        let mut data = Vec::new();
+        let mut acc = vec![0.0; b.cols];
+        let mut mark = vec![usize::MAX; b.cols];
+        let mut cols_here: Vec<usize> = Vec::new();
+        indptr.push(0);
+        for i in 0..self.rows {
+            cols_here.clear();
+            let (ac, av) = self.row(i);
+            for (&k, &a_ik) in ac.iter().zip(av) {
+                let (bc, bv) = b.row(k);
+                for (&j, &b_kj) in bc.iter().zip(bv) {
+                    if mark[j] != i {
+                        mark[j] = i;
+                        acc[j] = 0.0;
+                        cols_here.push(j);
+                    }
+                    acc[j] += a_ik * b_kj;
+                }
+            }
+            cols_here.sort_unstable();
+            for &j in &cols_here {
+                indices.push(j);
+                data.push(acc[j]);
+            }
+            indptr.push(indices.len());
+        }
+        Mat { rows: self.rows, cols: b.cols, indptr, indices, data }
+    }
+}
+
+/// Dense LU with partial pivoting: the coarsest multigrid level.
+struct DenseLu {
+    n: usize,
+    lu: Vec<f64>,
+    piv: Vec<usize>,
+}
+
+impl DenseLu {
+    /// `None` when a pivot is negligible against the matrix scale (singular coarse matrix).
+    fn factor(a: &Mat) -> Option<DenseLu> {
+        let n = a.rows;
+        let mut lu = vec![0.0; n * n];
+        for i in 0..n {
+            let (cols, vals) = a.row(i);
+            for (&j, &v) in cols.iter().zip(vals) {
+                lu[i * n + j] += v;
+            }
+        }
+        let scale = lu.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if scale == 0.0 || !scale.is_finite() {
+            return None;
+        }
+        let mut piv: Vec<usize> = (0..n).collect();
+        for k in 0..n {
+            let p = (k..n).max_by(|&x, &y| lu[x * n + k].abs().total_cmp(&lu[y * n + k].abs()))?;
+            if lu[p * n + k].abs() <= 1e-13 * scale {
+                return None;
+            }
+            if p != k {
+                for j in 0..n {
+                    lu.swap(k * n + j, p * n + j);
+                }
+                piv.swap(k, p);
+            }
+            let pivot = lu[k * n + k];
+            for i in k + 1..n {
+                let l = lu[i * n + k] / pivot;
+                lu[i * n + k] = l;
+                if l != 0.0 {
+                    for j in k + 1..n {
+                        lu[i * n + j] -= l * lu[k * n + j];
+                    }
+                }
+            }
+        }
+        Some(DenseLu { n, lu, piv })
+    }
+
+    fn solve(&self, b: &[f64], x: &mut [f64]) {
+        let n = self.n;
+        for i in 0..n {
+            x[i] = b[self.piv[i]];
+        }
+        for i in 0..n {
+            let s: f64 = (0..i).map(|j| self.lu[i * n + j] * x[j]).sum();
+            x[i] -= s;
+        }
+        for i in (0..n).rev() {
+            let s: f64 = (i + 1..n).map(|j| self.lu[i * n + j] * x[j]).sum();
+            x[i] = (x[i] - s) / self.lu[i * n + i];
+        }
+    }
+}
+
+/// One level of the multigrid hierarchy: its matrix, and the prolongator to it from the next
+/// coarser level (with its transpose, the restriction).
+struct AmgLevel {
+    a: Mat,
+    inv_diag: Vec<f64>,
+    p: Mat,
+    r: Mat,
+}
+
+/// Smoothed-aggregation AMG used as a preconditioner: one V(1,1)-cycle with a forward
+/// Gauss–Seidel pre-smoothing and a backward Gauss–Seidel post-smoothing sweep, so the cycle
+/// is a symmetric operator for a symmetric A (as CG requires).
+struct Amg {
+    levels: Vec<AmgLevel>,
+    coarse: DenseLu,
+}
+
+/// Strength-of-connection threshold: |a_IJ| ≥ θ·√(|a_II|·|a_JJ|).
+const AMG_THETA: f64 = 0.08;
+/// Stop coarsening at this many unknowns (solved densely).
+const AMG_COARSEST: usize = 400;
+
+impl Amg {
+    fn build(a: &Csr, block: usize) -> Option<Amg> {
+        if block == 0 || a.n % block != 0 || a.n == 0 {
+            return None;
+        }
+        let mut levels = Vec::new();
+        let mut cur = Mat::from_csr(a);
+        while cur.rows > AMG_COARSEST && levels.len() < 30 {
+            let inv_diag = inverse_diagonal(&cur)?;
+            let (agg, n_agg) = aggregate(&cur, block);
+            if n_agg * block * 10 > cur.rows * 9 {
+                break; // coarsening stalled
+            }
+            let p = smoothed_prolongator(&cur, &inv_diag, &agg, block, n_agg * block);
+            let r = p.transpose();
+            // Galerkin coarse operator A_c = Pᵀ·A·P.
+            let coarse = r.mul(&cur.mul(&p));
+            levels.push(AmgLevel { a: cur, inv_diag, p, r });
+            cur = coarse;
+        }
+        if cur.rows > 4 * AMG_COARSEST {
+            return None; // a dense solve this large would cost more than it saves
+        }
+        if std::env::var_os("FOLDFREE_AMG_DEBUG").is_some() {
+            for l in &levels {
+                eprintln!("amg level rows {} nnz {}", l.a.rows, l.a.data.len());
+            }
+            eprintln!("amg coarse rows {} nnz {}", cur.rows, cur.data.len());
+        }
+        let coarse = DenseLu::factor(&cur)?;
+        Some(Amg { levels, coarse })
+    }
+
+    fn apply(&self, r: &[f64], z: &mut [f64]) {
+        self.cycle(0, r, z);
+    }
+
+    fn cycle(&self, l: usize, b: &[f64], x: &mut [f64]) {
+        let Some(lev) = self.levels.get(l) else {
+            self.coarse.solve(b, x);
+            return;
+        };
+        x.fill(0.0);
+        gauss_seidel(lev, b, x, false);
+        // Coarse correction: x += P·cycle(Pᵀ(b − A x)).
+        let mut res = vec![0.0; lev.a.rows];
+        lev.a.spmv(x, &mut res);
+        for (ri, bi) in res.iter_mut().zip(b) {
+            *ri = bi - *ri;
+        }
+        let mut bc = vec![0.0; lev.r.rows];
+        lev.r.spmv(&res, &mut bc);
+        let mut xc = vec![0.0; lev.r.rows];
+        self.cycle(l + 1, &bc, &mut xc);
+        lev.p.spmv(&xc, &mut res);
+        for (xi, ci) in x.iter_mut().zip(&res) {
+            *xi += ci;
+        }
+        gauss_seidel(lev, b, x, true);
+    }
+}
+
+/// 1/a_ii for every row; `None` if a diagonal is zero or not finite.
+fn inverse_diagonal(a: &Mat) -> Option<Vec<f64>> {
+    (0..a.rows)
+        .map(|i| {
+            let (cols, vals) = a.row(i);
+            let d = cols.iter().position(|&j| j == i).map_or(0.0, |p| vals[p]);
+            (d != 0.0 && d.is_finite()).then(|| 1.0 / d)
+        })
+        .collect()
+}
+
+/// One Gauss–Seidel sweep x_i ← (b_i − Σ_{j≠i} a_ij x_j)/a_ii, forward or backward.
+fn gauss_seidel(lev: &AmgLevel, b: &[f64], x: &mut [f64], backward: bool) {
+    let sweep = |i: usize, x: &mut [f64]| {
+        let (cols, vals) = lev.a.row(i);
+        let mut s = b[i];
+        for (&j, &v) in cols.iter().zip(vals) {
+            if j != i {
+                s -= v * x[j];
+            }
+        }
+        x[i] = s * lev.inv_diag[i];
+    };
+    if backward {
+        for i in (0..lev.a.rows).rev() {
+            sweep(i, x);
+        }
+    } else {
+        for i in 0..lev.a.rows {
+            sweep(i, x);
+        }
+    }
+}
+
+/// Greedy aggregation of the strong-connection graph between nodes (blocks of `block`
+/// unknowns): (1) a node whose strong neighbours are all free seeds an aggregate with them,
+/// (2) left-over nodes join a neighbouring aggregate of step 1, (3) the rest seed new
+/// aggregates with their free neighbours. Returns node → aggregate and the aggregate count.
+fn aggregate(a: &Mat, block: usize) -> (Vec<usize>, usize) {
+    let nn = a.rows / block;
+    // Node diagonal scale d_I = max_c |a_(I,c),(I,c)|.
+    let mut diag = vec![0.0f64; nn];
+    for i in 0..a.rows {
+        let (cols, vals) = a.row(i);
+        for (&j, &v) in cols.iter().zip(vals) {
+            if j == i {
+                diag[i / block] = diag[i / block].max(v.abs());
+            }
+        }
+    }
+    // Strong neighbours: max block entry |a_IJ| ≥ θ·√(d_I·d_J).
+    let mut sptr = vec![0usize; nn + 1];
+    let mut sidx = Vec::new();
+    let mut mag = vec![0.0f64; nn];
+    let mut touched = Vec::new();
+    for node in 0..nn {
+        for i in node * block..(node + 1) * block {
+            let (cols, vals) = a.row(i);
+            for (&j, &v) in cols.iter().zip(vals) {
+                let other = j / block;
+                if other != node {
+                    if mag[other] == 0.0 {
+                        touched.push(other);
+                    }
+                    mag[other] = mag[other].max(v.abs()).max(f64::MIN_POSITIVE);
+                }
+            }
+        }
+        for &other in &touched {
+            if mag[other] >= AMG_THETA * (diag[node] * diag[other]).sqrt() {
+                sidx.push(other);
+            }
+            mag[other] = 0.0;
+        }
+        touched.clear();
+        sptr[node + 1] = sidx.len();
+    }
+    const FREE: usize = usize::MAX;
+    let mut agg = vec![FREE; nn];
+    let mut n_agg = 0;
+    for node in 0..nn {
+        let nb = &sidx[sptr[node]..sptr[node + 1]];
+        if agg[node] == FREE && !nb.is_empty() && nb.iter().all(|&o| agg[o] == FREE) {
+            agg[node] = n_agg;
+            for &o in nb {
+                agg[o] = n_agg;
+            }
+            n_agg += 1;
+        }
+    }
+    let first = agg.clone();
+    for node in 0..nn {
+        if agg[node] == FREE {
+            if let Some(&o) = sidx[sptr[node]..sptr[node + 1]].iter().find(|&&o| first[o] != FREE) {
+                agg[node] = first[o];
+            }
+        }
+    }
+    for node in 0..nn {
+        if agg[node] == FREE {
+            agg[node] = n_agg;
+            for &o in &sidx[sptr[node]..sptr[node + 1]] {
+                if agg[o] == FREE {
+                    agg[o] = n_agg;
+                }
+            }
+            n_agg += 1;
+        }
+    }
+    (agg, n_agg)
+}
+
+/// P = (I − ω D⁻¹A)·P_tent, P_tent the piecewise-constant injection (unknown c of node I →
+/// coarse unknown c of aggregate(I)), ω = 4/(3ρ) with ρ ≥ ρ(D⁻¹A) by Gershgorin.
+fn smoothed_prolongator(a: &Mat, inv_diag: &[f64], agg: &[usize], block: usize, nc: usize) -> Mat {
+    let coarse_of = |j: usize| agg[j / block] * block + j % block;
+    let rho = (0..a.rows)
+        .map(|i| a.row(i).1.iter().map(|v| v.abs()).sum::<f64>() * inv_diag[i].abs())
+        .fold(0.0f64, f64::max);
+    let omega = if rho > 0.0 { 4.0 / (3.0 * rho) } else { 0.0 };
+    let mut indptr = Vec::with_capacity(a.rows + 1);
+    let mut indices = Vec::new();
+    let mut data = Vec::new();
+    let mut acc = vec![0.0; nc];
+    let mut mark = vec![usize::MAX; nc];
+    let mut cols_here = Vec::new();
+    indptr.push(0);
+    for i in 0..a.rows {
+        cols_here.clear();
+        let mut put = |c: usize, v: f64, cols_here: &mut Vec<usize>| {
+            if mark[c] != i {
+                mark[c] = i;
+                acc[c] = 0.0;
+                cols_here.push(c);
+            }
+            acc[c] += v;
+        };
+        put(coarse_of(i), 1.0, &mut cols_here);
+        let (cols, vals) = a.row(i);
+        for (&j, &v) in cols.iter().zip(vals) {
+            put(coarse_of(j), -omega * inv_diag[i] * v, &mut cols_here);
+        }
+        cols_here.sort_unstable();
+        for &c in &cols_here {
+            indices.push(c);
+            data.push(acc[c]);
+        }
+        indptr.push(indices.len());
+    }
+    Mat { rows: a.rows, cols: nc, indptr, indices, data }
 }
 
 /// Diagonal shifts tried, in order, when an incomplete factorisation breaks down.
@@ -347,7 +749,12 @@ fn build_precond<'a>(
     if kind == Preconditioner::None {
         return Ok((Precond::Identity, Preconditioner::None, 0.0));
     }
-    if kind == Preconditioner::Ic0 {
+    if let Preconditioner::Amg { block_size } = kind {
+        if let Some(amg) = Amg::build(a, block_size) {
+            return Ok((Precond::Amg(amg), kind, 0.0));
+        }
+    }
+    if matches!(kind, Preconditioner::Ic0 | Preconditioner::Amg { .. }) {
         for shift in SHIFTS {
             let built = if spd {
                 Ic0::factor(a, shift).map(Precond::Ic0)

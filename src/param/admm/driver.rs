@@ -9,6 +9,9 @@ use super::{AdmmProblem, AdmmState};
 use crate::param::energy::{self, Energy};
 use crate::param::recover::LeastSquaresRecovery;
 
+/// Checks without a new low of the primal residual before μ is raised.
+pub const STALL_CHECKS: usize = 4;
+
 /// Which executor runs the iteration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -159,13 +162,15 @@ pub fn map_energy(
 
 /// Runs ADMM from the per-vertex start map `init_uv` (#V) until convergence or `max_iters`.
 ///
-/// `progress` is called at every check. Never returns a flipped map silently: the result's
+/// `fallback` is a flip-free map (e.g. Tutte) returned if neither the start map nor any
+/// recovered map is flip-free. `progress` is called at every check. Never returns a flipped map silently: the result's
 /// `flips` counts them (non-zero only when the start map was already flipped and no recovered
 /// map ever was flip-free).
 pub fn solve(
     problem: &AdmmProblem,
     faces: &[[u32; 3]],
     init_uv: &[[f64; 2]],
+    fallback: Option<&[[f64; 2]]>,
     opts: &AdmmOptions,
     exec: &mut dyn Executor,
     progress: &mut dyn FnMut(&History),
@@ -181,6 +186,14 @@ pub fn solve(
     let mut best_uv = init_uv.to_vec();
     let mut best = if flips0 == 0 { e0 } else { f64::INFINITY };
     let mut best_flips = flips0;
+    if let Some(fb) = fallback {
+        let (e, flips) = map_energy(problem, faces, fb, opts.energy);
+        if flips == 0 && e < best {
+            best = e;
+            best_uv = fb.to_vec();
+            best_flips = 0;
+        }
+    }
     let mut uv = init_uv.to_vec();
 
     let mut history: Vec<History> = Vec::new();
@@ -188,7 +201,10 @@ pub fn solve(
     let mut converged = false;
     let mut interrupted = false;
     let mut prev_energy = f64::NAN;
-    let mut prev_primal = f64::INFINITY;
+    // Stall detection: the best primal residual since the last change of μ, and how many
+    // checks ago it was set.
+    let mut best_primal = f64::INFINITY;
+    let mut checks_since_best = 0usize;
     let mut since_resync = 0usize;
     while it < opts.max_iters {
         if opts
@@ -257,11 +273,20 @@ pub fn solve(
                 since_resync = 0;
             }
         }
-        if opts.adaptive_mu && !converged && primal > 1.5 * prev_primal && primal > opts.tol_primal
-        {
-            mu_rel *= 2.0;
+        if primal < 0.95 * best_primal {
+            best_primal = primal;
+            checks_since_best = 0;
+        } else {
+            checks_since_best += 1;
         }
-        prev_primal = primal;
+        // Below the stability threshold of μ the iteration oscillates (primal ≈ dual, no
+        // progress) and then diverges; above it, it converges monotonically. So: raise μ when
+        // the primal residual is above tolerance and has made no new low for a while.
+        if opts.adaptive_mu && !converged && primal > opts.tol_primal && checks_since_best >= STALL_CHECKS {
+            mu_rel *= 2.0;
+            best_primal = primal;
+            checks_since_best = 0;
+        }
         progress(&h);
         history.push(h);
         if converged {

@@ -4,10 +4,6 @@
 
 use crate::param::energy::{self, Energy};
 
-/// Fixed number of cyclic Jacobi sweeps for the 4x4 eigenproblem (the GLSL twin uses the same
-/// count; 6 sweeps take a symmetric 4x4 to machine precision in practice).
-pub const JACOBI_SWEEPS: usize = 6;
-
 /// Maximum step halvings in the face line search.
 pub const MAX_HALVINGS: usize = 24;
 
@@ -18,49 +14,111 @@ pub const ARMIJO: f64 = 1e-4;
 /// valid step: it makes the face degenerate).
 pub const FLIP_FREE_FRACTION: f64 = 0.9;
 
-/// Eigen-decomposition of a symmetric 4x4 matrix by cyclic Jacobi rotations.
-/// Returns eigenvalues and eigenvectors as the columns of `v` (`v[row][col]`).
-pub fn jacobi_eigen4(h: &[[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
-    let mut a = *h;
-    let mut v = [[0.0; 4]; 4];
-    for i in 0..4 {
-        v[i][i] = 1.0;
-    }
-    for _ in 0..JACOBI_SWEEPS {
-        for p in 0..3 {
-            for q in (p + 1)..4 {
-                let apq = a[p][q];
-                if apq == 0.0 {
-                    continue;
-                }
-                // Rotation angle that zeroes a[p][q]: tan 2θ = 2 a_pq / (a_qq − a_pp).
-                let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..4 {
-                    let akp = a[k][p];
-                    let akq = a[k][q];
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
-                }
-                for k in 0..4 {
-                    let apk = a[p][k];
-                    let aqk = a[q][k];
-                    a[p][k] = c * apk - s * aqk;
-                    a[q][k] = s * apk + c * aqk;
-                }
-                for k in 0..4 {
-                    let vkp = v[k][p];
-                    let vkq = v[k][q];
-                    v[k][p] = c * vkp - s * vkq;
-                    v[k][q] = s * vkp + c * vkq;
-                }
-            }
+/// Signed SVD of a 2x2 `A = U diag(σ1, σ2) Vᵀ` with rotations `U = rot(φ)`, `Vᵀ = rot(θ)`,
+/// σ1 ≥ |σ2| (σ2 < 0 iff det A < 0). Returned as `(cos φ, sin φ, σ1, σ2, cos θ, sin θ)`.
+pub fn svd2(a: &[f64; 4]) -> [f64; 6] {
+    let e = 0.5 * (a[0] + a[3]);
+    let f = 0.5 * (a[0] - a[3]);
+    let g = 0.5 * (a[2] + a[1]);
+    let h = 0.5 * (a[2] - a[1]);
+    let q = e.hypot(h);
+    let r = f.hypot(g);
+    let a1 = g.atan2(f);
+    let a2 = h.atan2(e);
+    let theta = 0.5 * (a2 - a1);
+    let phi = 0.5 * (a2 + a1);
+    [phi.cos(), phi.sin(), q + r, q - r, theta.cos(), theta.sin()]
+}
+
+/// `U X Vᵀ` for `U = rot(φ)`, `Vᵀ = rot(θ)` given as cos/sin pairs; row-major.
+fn rotate(u: [f64; 2], x: [f64; 4], vt: [f64; 2]) -> [f64; 4] {
+    let um = [u[0], -u[1], u[1], u[0]];
+    let vm = [vt[0], -vt[1], vt[1], vt[0]];
+    let ux = [
+        um[0] * x[0] + um[1] * x[2],
+        um[0] * x[1] + um[1] * x[3],
+        um[2] * x[0] + um[3] * x[2],
+        um[2] * x[1] + um[3] * x[3],
+    ];
+    [
+        ux[0] * vm[0] + ux[1] * vm[2],
+        ux[0] * vm[1] + ux[1] * vm[3],
+        ux[2] * vm[0] + ux[3] * vm[2],
+        ux[2] * vm[1] + ux[3] * vm[3],
+    ]
+}
+
+/// Eigen-system of the energy's 4x4 Hessian in closed form (Smith, de Goes & Kim 2019,
+/// "Analytic eigensystems for isotropic distortion energies", 2D case): with `A = U Σ Vᵀ`,
+/// twist `U[0 −1; 1 0]Vᵀ/√2` has λ = (Ψ₁+Ψ₂)/(σ1+σ2), flip `U[0 1; 1 0]Vᵀ/√2` has
+/// λ = (Ψ₁−Ψ₂)/(σ1−σ2) (both simplified below so σ1 = σ2 needs no limit), and the two scaling
+/// modes `U diag(c) Vᵀ` come from the 2x2 Hessian of Ψ(σ1, σ2). Orthonormal (Frobenius).
+/// Only for `det A > 0`.
+pub fn hessian_eigensystem(energy: Energy, a: &[f64; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
+    let [cu, su, s1, s2, cv, sv] = svd2(a);
+    let p12 = s1 * s2;
+    let (twist, flip, h11, h22, h12) = match energy {
+        Energy::Mips => {
+            let d = 1.0 / (p12 * p12);
+            (
+                -(s1 - s2) * (s1 - s2) * d,
+                (s1 + s2) * (s1 + s2) * d,
+                2.0 * s2 / (s1 * s1 * s1),
+                2.0 * s1 / (s2 * s2 * s2),
+                -(s1 * s1 + s2 * s2) * d,
+            )
+        }
+        Energy::SymmetricDirichlet => {
+            let p3 = 1.0 / (p12 * p12 * p12);
+            (
+                2.0 - 2.0 * (s1 * s1 - p12 + s2 * s2) * p3,
+                2.0 + 2.0 * (s1 * s1 + p12 + s2 * s2) * p3,
+                2.0 + 6.0 / (s1 * s1 * s1 * s1),
+                2.0 + 6.0 / (s2 * s2 * s2 * s2),
+                0.0,
+            )
+        }
+    };
+    // 2x2 symmetric [h11 h12; h12 h22] by one rotation ψ.
+    let psi = 0.5 * (2.0 * h12).atan2(h11 - h22);
+    let (c, s) = (psi.cos(), psi.sin());
+    let l1 = h11 * c * c + 2.0 * h12 * s * c + h22 * s * s;
+    let l2 = h11 * s * s - 2.0 * h12 * s * c + h22 * c * c;
+    let r = std::f64::consts::FRAC_1_SQRT_2;
+    let u = [cu, su];
+    let vt = [cv, sv];
+    (
+        [twist, flip, l1, l2],
+        [
+            rotate(u, [0.0, -r, r, 0.0], vt),
+            rotate(u, [0.0, r, r, 0.0], vt),
+            rotate(u, [c, 0.0, 0.0, s], vt),
+            rotate(u, [-s, 0.0, 0.0, c], vt),
+        ],
+    )
+}
+
+/// Projected Newton direction `−(w H⁺ + nμ I)⁻¹ ∇F`, `H⁺` the energy Hessian with negative
+/// eigenvalues clamped to 0 — always defined, since `nμ > 0` (cf. the singular systems a
+/// plain solve hit in the prototype).
+pub fn projected_newton_direction(
+    energy: Energy,
+    a: &[f64; 4],
+    grad: &[f64; 4],
+    w: f64,
+    nmu: f64,
+) -> [f64; 4] {
+    let (lam, modes) = hessian_eigensystem(energy, a);
+    let mut p = [0.0; 4];
+    for k in 0..4 {
+        let m = &modes[k];
+        let proj = m[0] * grad[0] + m[1] * grad[1] + m[2] * grad[2] + m[3] * grad[3];
+        let coef = -proj / (w * lam[k].max(0.0) + nmu);
+        for i in 0..4 {
+            p[i] += coef * m[i];
         }
     }
-    ([a[0][0], a[1][1], a[2][2], a[3][3]], v)
+    p
 }
 
 /// Face objective `w E(A) + (n μ / 2) ‖A − B̄‖²` (the slot penalties summed into one term around
@@ -92,7 +150,7 @@ pub fn face_newton(
     // system definite along MIPS's scale direction without moving the minimiser.
     let (nmu, bbar) = if n == 0 { (1e-9 * w, a) } else { (nmu, bbar) };
     for _ in 0..iters {
-        let (e, g, h) = energy::eval(energy, &a);
+        let (e, g, _) = energy::eval(energy, &a);
         if !e.is_finite() {
             break;
         }
@@ -100,20 +158,7 @@ pub fn face_newton(
         for i in 0..4 {
             grad[i] = w * g[i] + nmu * (a[i] - bbar[i]);
         }
-        let (lam, v) = jacobi_eigen4(&h);
-        // p = −(w H⁺ + nμ I)⁻¹ ∇F through the eigenbasis; H⁺ clamps negative eigenvalues to 0.
-        let mut p = [0.0; 4];
-        for k in 0..4 {
-            let mut proj = 0.0;
-            for i in 0..4 {
-                proj += v[i][k] * grad[i];
-            }
-            let denom = w * lam[k].max(0.0) + nmu;
-            let coef = -proj / denom;
-            for i in 0..4 {
-                p[i] += coef * v[i][k];
-            }
-        }
+        let p = projected_newton_direction(energy, &a, &grad, w, nmu);
         let slope: f64 = grad.iter().zip(&p).map(|(x, y)| x * y).sum();
         if !(slope < 0.0) {
             break;
@@ -190,6 +235,103 @@ pub fn dual_update(lambda: &[f64; 4], y: &[f64; 4], a: &[f64; 4], mu: f64) -> [f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Fixed number of cyclic Jacobi sweeps for the 4x4 eigenproblem (the GLSL twin uses the same
+    /// count; 6 sweeps take a symmetric 4x4 to machine precision in practice).
+    const JACOBI_SWEEPS: usize = 6;
+
+    /// Eigen-decomposition of a symmetric 4x4 matrix by cyclic Jacobi rotations.
+    /// Returns eigenvalues and eigenvectors as the columns of `v` (`v[row][col]`).
+    fn jacobi_eigen4(h: &[[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
+        let mut a = *h;
+        let mut v = [[0.0; 4]; 4];
+        for i in 0..4 {
+            v[i][i] = 1.0;
+        }
+        for _ in 0..JACOBI_SWEEPS {
+            for p in 0..3 {
+                for q in (p + 1)..4 {
+                    let apq = a[p][q];
+                    if apq == 0.0 {
+                        continue;
+                    }
+                    // Rotation angle that zeroes a[p][q]: tan 2θ = 2 a_pq / (a_qq − a_pp).
+                    let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
+                    let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                    let t = if theta == 0.0 { 1.0 } else { t };
+                    let c = 1.0 / (t * t + 1.0).sqrt();
+                    let s = t * c;
+                    for k in 0..4 {
+                        let akp = a[k][p];
+                        let akq = a[k][q];
+                        a[k][p] = c * akp - s * akq;
+                        a[k][q] = s * akp + c * akq;
+                    }
+                    for k in 0..4 {
+                        let apk = a[p][k];
+                        let aqk = a[q][k];
+                        a[p][k] = c * apk - s * aqk;
+                        a[q][k] = s * apk + c * aqk;
+                    }
+                    for k in 0..4 {
+                        let vkp = v[k][p];
+                        let vkq = v[k][q];
+                        v[k][p] = c * vkp - s * vkq;
+                        v[k][q] = s * vkp + c * vkq;
+                    }
+                }
+            }
+        }
+        ([a[0][0], a[1][1], a[2][2], a[3][3]], v)
+    }
+
+    #[test]
+    fn analytic_eigensystem_matches_jacobi_on_the_hessian() {
+        for energy in [Energy::Mips, Energy::SymmetricDirichlet] {
+            for a in [
+                [1.0, 0.2, -0.3, 0.9],
+                [2.0, 0.0, 0.0, 0.5],
+                [0.7, -0.4, 0.5, 1.3],
+                [1.0, 0.0, 0.0, 1.0],
+            ] {
+                let (_, _, h) = energy::eval(energy, &a);
+                let (lam, modes) = hessian_eigensystem(energy, &a);
+                // Σ λ_k m_k m_kᵀ reassembles H.
+                for i in 0..4 {
+                    for j in 0..4 {
+                        let r: f64 = (0..4).map(|k| lam[k] * modes[k][i] * modes[k][j]).sum();
+                        assert!(
+                            (r - h[i][j]).abs() < 1e-9 * h[i][j].abs().max(1.0),
+                            "{energy:?} {a:?} H[{i}][{j}]"
+                        );
+                    }
+                }
+                let (mut jl, _) = jacobi_eigen4(&h);
+                let mut al = lam;
+                jl.sort_by(f64::total_cmp);
+                al.sort_by(f64::total_cmp);
+                for k in 0..4 {
+                    assert!((jl[k] - al[k]).abs() < 1e-8 * al[k].abs().max(1.0));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn svd2_reconstructs() {
+        for a in [
+            [1.0, 0.2, -0.3, 0.9],
+            [0.0, -1.0, 1.0, 0.0],
+            [3.0, 1.0, 1.0, -2.0],
+        ] {
+            let [cu, su, s1, s2, cv, sv] = svd2(&a);
+            let r = rotate([cu, su], [s1, 0.0, 0.0, s2], [cv, sv]);
+            for i in 0..4 {
+                assert!((r[i] - a[i]).abs() < 1e-12);
+            }
+            assert!(s1 >= s2.abs());
+        }
+    }
 
     #[test]
     fn jacobi_diagonalises() {
