@@ -5,6 +5,7 @@
 //!
 //! Only [`gpu`] contains `unsafe` code; every other module forbids it.
 
+pub mod bench;
 pub mod error;
 pub mod gpu;
 pub mod init;

@@ -33,6 +33,22 @@ enum Command {
     Param(ParamArgs),
     /// List the Vulkan devices and which one would be used.
     Devices,
+    /// Time `param` over meshes, energies and backends; prints a Markdown table.
+    Bench {
+        /// Input OBJ files (disk topology).
+        meshes: Vec<PathBuf>,
+        /// Energies to run (mips, sd).
+        #[arg(long, value_enum, num_args = 1.., default_values = ["mips", "sd"])]
+        energy: Vec<EnergyArg>,
+        /// Backends to run (cpu, vulkan, auto).
+        #[arg(long, value_enum, num_args = 1.., default_values = ["cpu", "vulkan"])]
+        backend: Vec<BackendArg>,
+        #[arg(long)]
+        max_iters: Option<usize>,
+        /// Directory for the output meshes.
+        #[arg(long, default_value = "target/bench-out")]
+        out_dir: PathBuf,
+    },
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -53,7 +69,7 @@ enum SolverArg {
     Admm,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
+#[derive(Clone, Copy, Debug, ValueEnum)]
 enum EnergyArg {
     /// Conformal: MIPS.
     Mips,
@@ -61,7 +77,7 @@ enum EnergyArg {
     Sd,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
+#[derive(Clone, Copy, Debug, ValueEnum)]
 enum BackendArg {
     /// Vulkan on a real GPU, else the CPU backend.
     Auto,
@@ -110,6 +126,9 @@ struct ParamArgs {
     /// Relative energy change tolerance between checks.
     #[arg(long)]
     tol_energy: Option<f64>,
+    /// Checks without progress of the primal residual before μ is doubled.
+    #[arg(long)]
+    stall_checks: Option<usize>,
     /// Newton steps per face per iteration.
     #[arg(long)]
     newton_iters: Option<u32>,
@@ -119,6 +138,9 @@ struct ParamArgs {
     /// Enable the Khronos validation layer (any message fails the run).
     #[arg(long)]
     validation: bool,
+    /// Per-kernel device times (Vulkan backend) in the report.
+    #[arg(long)]
+    profile: bool,
     /// No progress display.
     #[arg(short, long)]
     quiet: bool,
@@ -178,11 +200,45 @@ fn run_devices() -> foldfree::Result<()> {
     Ok(())
 }
 
-fn run_param(args: ParamArgs) -> foldfree::Result<()> {
-    let energy = match args.energy {
+fn energy_of(e: EnergyArg) -> Energy {
+    match e {
         EnergyArg::Mips => Energy::Mips,
         EnergyArg::Sd => Energy::SymmetricDirichlet,
+    }
+}
+
+fn backend_of(b: BackendArg) -> BackendChoice {
+    match b {
+        BackendArg::Auto => BackendChoice::Auto,
+        BackendArg::Cpu => BackendChoice::Cpu,
+        BackendArg::Vulkan => BackendChoice::Vulkan,
+    }
+}
+
+fn run_bench(
+    meshes: Vec<PathBuf>,
+    energy: Vec<EnergyArg>,
+    backend: Vec<BackendArg>,
+    max_iters: Option<usize>,
+    out_dir: PathBuf,
+) -> foldfree::Result<()> {
+    if meshes.is_empty() {
+        return Err(foldfree::Error::Usage("bench needs at least one mesh".into()));
+    }
+    let job = foldfree::bench::BenchJob {
+        meshes,
+        energies: energy.into_iter().map(energy_of).collect(),
+        backends: backend.into_iter().map(backend_of).collect(),
+        max_iters,
+        out_dir,
     };
+    let (_, table) = foldfree::bench::run_bench(&job, |line| eprintln!("{line}"))?;
+    println!("{table}");
+    Ok(())
+}
+
+fn run_param(args: ParamArgs) -> foldfree::Result<()> {
+    let energy = energy_of(args.energy);
     let solver = match args.solver {
         SolverArg::None => SolverChoice::None,
         SolverArg::Admm => SolverChoice::Admm,
@@ -222,6 +278,9 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     if let Some(t) = args.tol_energy {
         admm.tol_energy = t;
     }
+    if let Some(n) = args.stall_checks {
+        admm.stall_checks = n;
+    }
     if let Some(n) = args.newton_iters {
         admm.newton_iters = n;
     }
@@ -229,13 +288,10 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     let mut job = ParamJob::new(&args.input, &args.output);
     job.init = init;
     job.solver = solver;
-    job.backend = match args.backend {
-        BackendArg::Auto => BackendChoice::Auto,
-        BackendArg::Cpu => BackendChoice::Cpu,
-        BackendArg::Vulkan => BackendChoice::Vulkan,
-    };
+    job.backend = backend_of(args.backend);
     job.device = args.device.clone();
     job.validation = args.validation;
+    job.profile = args.profile;
     job.admm = admm;
 
     let bar = if args.quiet || solver == SolverChoice::None {
@@ -287,6 +343,16 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         r.boundary_self_intersections,
         r.seconds
     );
+    if let Some(t) = &r.kernel_times {
+        let per = |ns: u64| ns as f64 / 1e3 / t.iterations.max(1) as f64;
+        eprintln!(
+            "  device time per iteration: face_newton {:.1} µs, edge_project {:.1} µs, dual_update {:.1} µs; residual {:.1} µs per check",
+            per(t.face_newton_ns),
+            per(t.edge_project_ns),
+            per(t.dual_update_ns),
+            t.residual_ns as f64 / 1e3 / r.history.len().max(1) as f64
+        );
+    }
     Ok(())
 }
 
@@ -296,6 +362,7 @@ fn main() -> ExitCode {
         Command::Stats { input, json } => run_stats(input, json),
         Command::Param(args) => run_param(args),
         Command::Devices => run_devices(),
+        Command::Bench { meshes, energy, backend, max_iters, out_dir } => run_bench(meshes, energy, backend, max_iters, out_dir),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

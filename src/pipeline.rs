@@ -51,6 +51,9 @@ pub struct ParamJob {
     /// Vulkan device name substring or index.
     pub device: Option<String>,
     pub validation: bool,
+    /// Per-kernel device times from timestamp queries (Vulkan backend; slows the run down,
+    /// since every iteration is then its own submission).
+    pub profile: bool,
     pub admm: AdmmOptions,
     pub validate: mesh::validate::ValidateOptions,
 }
@@ -66,6 +69,7 @@ impl ParamJob {
             backend: BackendChoice::Auto,
             device: None,
             validation: false,
+            profile: false,
             admm: AdmmOptions::default(),
             validate: mesh::validate::ValidateOptions::default(),
         }
@@ -202,6 +206,8 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
                     &mut exec,
                     progress,
                 )?;
+                report.kernel_times = exec.kernel_times().cloned();
+                report.bytes_per_iteration = Some(exec.bytes_per_iteration());
                 let messages = ctx.take_validation_messages();
                 if !messages.is_empty() {
                     return Err(crate::gpu::GpuError::Invalid(format!(

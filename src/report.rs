@@ -36,5 +36,9 @@ pub struct ParamReport {
     pub converged: Option<bool>,
     pub mu_rel: Option<f64>,
     pub init_flips: usize,
+    /// Device time per kernel (`--profile`, Vulkan only).
+    pub kernel_times: Option<crate::param::admm::vulkan::KernelTimes>,
+    /// Bytes the kernels read and write per iteration (Vulkan only), for bandwidth estimates.
+    pub bytes_per_iteration: Option<u64>,
     pub history: Vec<crate::param::admm::History>,
 }

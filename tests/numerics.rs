@@ -903,8 +903,10 @@ fn zz_scratch_lscm_big() {
     let name = std::env::var("MESH").unwrap_or("igea_open_249k.obj".into());
     let (p, f) = load_obj(&Path::new("/work/shared/meshes/disk").join(name));
     let b = boundary_loops(&f).into_iter().max_by_key(|l| l.len()).unwrap();
-    for (pre, pre2) in [(Preconditioner::Ic0, Preconditioner::Ic0), (Preconditioner::Amg { block_size: 1 }, Preconditioner::Amg { block_size: 2 })] {
+    let all = [(Preconditioner::Ic0, Preconditioner::Ic0), (Preconditioner::Amg { block_size: 1 }, Preconditioner::Amg { block_size: 2 })];
+    for &(pre, pre2) in &all[std::env::var("SKIP").map_or(0, |s| s.parse().unwrap())..] {
         for w in [TutteWeights::Uniform, TutteWeights::MeanValue] {
+            if std::env::var_os("NOTUTTE").is_some() { continue; }
             let t = std::time::Instant::now();
             let r = init::tutte_report(&p, &f, &b, w, &CgOptions { tolerance: 1e-12, max_iterations: 50000, preconditioner: pre }).unwrap();
             eprintln!("tutte {w:?} {pre:?}: {:.2} s it {} used {:?} flips {}", t.elapsed().as_secs_f64(), r.iterations, r.preconditioner, r.flips);

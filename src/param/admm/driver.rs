@@ -9,9 +9,6 @@ use super::{AdmmProblem, AdmmState};
 use crate::param::energy::{self, Energy};
 use crate::param::recover::LeastSquaresRecovery;
 
-/// Checks without a new low of the primal residual before μ is raised.
-pub const STALL_CHECKS: usize = 4;
-
 /// Which executor runs the iteration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -67,8 +64,13 @@ pub struct AdmmOptions {
     pub tol_energy: f64,
     /// Least-squares re-synchronisation period in iterations (0: off).
     pub resync_every: usize,
-    /// Raise μ when the primal residual grows (oscillation / divergence).
+    /// Raise μ (×2) when the primal residual stalls above tolerance (oscillation that
+    /// precedes divergence).
     pub adaptive_mu: bool,
+    /// Checks without a new low (< 0.95× the best) of the primal residual before μ is raised.
+    pub stall_checks: usize,
+    /// Upper bound of the adaptive μ, as a multiple of the initial μ.
+    pub mu_growth_max: f64,
     /// Set to stop early (Ctrl-C); the best flip-free map so far is returned.
     pub stop: Option<Arc<AtomicBool>>,
 }
@@ -87,6 +89,8 @@ impl AdmmOptions {
             tol_energy: 1e-5,
             resync_every: 0,
             adaptive_mu: true,
+            stall_checks: 8,
+            mu_growth_max: 64.0,
             stop: None,
         }
     }
@@ -259,7 +263,7 @@ pub fn solve(
             }
             if small && flips == 0 {
                 converged = true;
-            } else if small && flips > 0 && opts.adaptive_mu {
+            } else if small && flips > 0 && opts.adaptive_mu && mu_rel * 2.0 <= opts.initial_mu_rel() * opts.mu_growth_max {
                 // Residuals are small but the consensus is not yet tight enough for a flip-free
                 // recovery: tighten it.
                 mu_rel *= 2.0;
@@ -282,7 +286,9 @@ pub fn solve(
         // Below the stability threshold of μ the iteration oscillates (primal ≈ dual, no
         // progress) and then diverges; above it, it converges monotonically. So: raise μ when
         // the primal residual is above tolerance and has made no new low for a while.
-        if opts.adaptive_mu && !converged && primal > opts.tol_primal && checks_since_best >= STALL_CHECKS {
+        if opts.adaptive_mu && !converged && primal > opts.tol_primal && checks_since_best >= opts.stall_checks
+            && mu_rel * 2.0 <= opts.initial_mu_rel() * opts.mu_growth_max
+        {
             mu_rel *= 2.0;
             best_primal = primal;
             checks_since_best = 0;

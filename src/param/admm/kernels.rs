@@ -160,7 +160,7 @@ pub fn face_newton(
         }
         let p = projected_newton_direction(energy, &a, &grad, w, nmu);
         let slope: f64 = grad.iter().zip(&p).map(|(x, y)| x * y).sum();
-        if !(slope < 0.0) {
+        if slope.is_nan() || slope >= 0.0 {
             break;
         }
         let f0 = w * e

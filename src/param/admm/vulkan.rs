@@ -203,6 +203,18 @@ impl VulkanExecutor {
         self.profile.as_ref().map(|(_, t)| t)
     }
 
+    /// Storage-buffer bytes one iteration reads and writes (face, edge and dual kernels; the
+    /// residual pass once per batch is not counted): face = A r/w, slots, weight, and Y, Λ of
+    /// each slot; edge = per slot A, Λ, face index, direction read and Y written; dual = per
+    /// slot A, Y, face index read and Λ read/written.
+    pub fn bytes_per_iteration(&self) -> u64 {
+        let (f, s) = (u64::from(self.n_faces), u64::from(self.n_slots));
+        let face = f * (16 + 16 + 16 + 4) + s * 32;
+        let edge = s * (16 + 16 + 4 + 8 + 16);
+        let dual = s * (16 + 16 + 4 + 16 + 16);
+        face + edge + dual
+    }
+
     /// The context (for its validation messages).
     pub fn context(&self) -> &Context {
         &self.ctx
