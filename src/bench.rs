@@ -32,13 +32,19 @@ pub struct BenchRow {
 
 /// Runs every combination; a failed run becomes a row with the error text.
 pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<BenchRow>, String)> {
-    std::fs::create_dir_all(&job.out_dir).map_err(|source| crate::Error::Io { path: job.out_dir.clone(), source })?;
+    std::fs::create_dir_all(&job.out_dir).map_err(|source| crate::Error::Io {
+        path: job.out_dir.clone(),
+        source,
+    })?;
     let mut rows = Vec::new();
     let mut table = String::from(
         "| mesh | faces | energy | backend | iterations | converged | s/iteration | solve s | total s | δcon mean | SD | flips |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for mesh in &job.meshes {
-        let stem = mesh.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+        let stem = mesh
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default();
         for &energy in &job.energies {
             for &backend in &job.backends {
                 let tag = format!("{stem}-{energy:?}-{backend:?}").to_lowercase();
@@ -51,7 +57,11 @@ pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<Bench
                 match run_param(&pj, &mut |_| {}) {
                     Ok(out) => {
                         let r = out.report;
-                        let per_it = if r.iterations > 0 { r.seconds_solve / r.iterations as f64 } else { 0.0 };
+                        let per_it = if r.iterations > 0 {
+                            r.seconds_solve / r.iterations as f64
+                        } else {
+                            0.0
+                        };
                         let line = format!(
                             "| {stem} | {} | {} | {} ({}) | {} | {} | {:.4} | {:.2} | {:.2} | {:.4} | {:.4} | {} |",
                             r.faces,
@@ -69,10 +79,16 @@ pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<Bench
                         );
                         log(&line);
                         let _ = writeln!(table, "{line}");
-                        rows.push(BenchRow { mesh: stem.clone(), energy, report: r });
+                        rows.push(BenchRow {
+                            mesh: stem.clone(),
+                            energy,
+                            report: r,
+                        });
                     }
                     Err(e) => {
-                        let line = format!("| {stem} | | {energy:?} | {backend:?} | error: {e} | | | | | | | |");
+                        let line = format!(
+                            "| {stem} | | {energy:?} | {backend:?} | error: {e} | | | | | | | |"
+                        );
                         log(&line);
                         let _ = writeln!(table, "{line}");
                     }

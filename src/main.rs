@@ -14,7 +14,11 @@ use foldfree::param::Energy;
 use foldfree::pipeline::{self, BackendChoice, InitMethod, ParamJob, SolverChoice};
 
 #[derive(Parser)]
-#[command(name = "foldfree", version, about = "Foldover-free, low-distortion maps of meshes (Vulkan compute + CPU f64)")]
+#[command(
+    name = "foldfree",
+    version,
+    about = "Foldover-free, low-distortion maps of meshes (Vulkan compute + CPU f64)"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -171,7 +175,11 @@ fn run_stats(input: PathBuf, json: bool) -> foldfree::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
     } else {
         println!("file: {}", input.display());
-        println!("vertices: {} ({} unreferenced)", m.positions.len(), report.unreferenced_vertices.len());
+        println!(
+            "vertices: {} ({} unreferenced)",
+            m.positions.len(),
+            report.unreferenced_vertices.len()
+        );
         println!("faces: {}", m.faces.len());
         println!(
             "edges: {} ({} interior, {} boundary)",
@@ -187,16 +195,26 @@ fn run_stats(input: PathBuf, json: bool) -> foldfree::Result<()> {
             Some(g) => println!("genus: {g}"),
             None => println!("genus: undefined"),
         }
-        println!("bbox diagonal: {:.6e}, min face area: {:.6e}", report.bbox_diagonal, report.min_face_area);
+        println!(
+            "bbox diagonal: {:.6e}, min face area: {:.6e}",
+            report.bbox_diagonal, report.min_face_area
+        );
         println!("topology: {}", topo.describe());
-        println!("valid: yes; disk: {}", if topo.is_disk() { "yes" } else { "no" });
+        println!(
+            "valid: yes; disk: {}",
+            if topo.is_disk() { "yes" } else { "no" }
+        );
     }
     Ok(())
 }
 
 fn run_devices() -> foldfree::Result<()> {
     let ctx = foldfree::gpu::Context::new(&foldfree::gpu::ContextDesc::default())?;
-    println!("selected: {} ({})", ctx.device_name(), ctx.device_type_name());
+    println!(
+        "selected: {} ({})",
+        ctx.device_name(),
+        ctx.device_type_name()
+    );
     Ok(())
 }
 
@@ -223,7 +241,9 @@ fn run_bench(
     out_dir: PathBuf,
 ) -> foldfree::Result<()> {
     if meshes.is_empty() {
-        return Err(foldfree::Error::Usage("bench needs at least one mesh".into()));
+        return Err(foldfree::Error::Usage(
+            "bench needs at least one mesh".into(),
+        ));
     }
     let job = foldfree::bench::BenchJob {
         meshes,
@@ -299,8 +319,10 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     } else {
         let b = indicatif::ProgressBar::new(job.admm.max_iters as u64);
         b.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} ADMM [{bar:30}] {pos}/{len} it {msg}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template(
+                "{spinner} ADMM [{bar:30}] {pos}/{len} it {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         b
     };
@@ -328,7 +350,10 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         r.solver,
         match r.converged {
             Some(true) => format!(", converged in {} iterations", r.iterations),
-            Some(false) => format!(", NOT converged after {} iterations (best flip-free map written)", r.iterations),
+            Some(false) => format!(
+                ", NOT converged after {} iterations (best flip-free map written)",
+                r.iterations
+            ),
             None => String::new(),
         }
     );
@@ -362,7 +387,13 @@ fn main() -> ExitCode {
         Command::Stats { input, json } => run_stats(input, json),
         Command::Param(args) => run_param(args),
         Command::Devices => run_devices(),
-        Command::Bench { meshes, energy, backend, max_iters, out_dir } => run_bench(meshes, energy, backend, max_iters, out_dir),
+        Command::Bench {
+            meshes,
+            energy,
+            backend,
+            max_iters,
+            out_dir,
+        } => run_bench(meshes, energy, backend, max_iters, out_dir),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

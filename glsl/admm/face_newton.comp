@@ -60,23 +60,31 @@ void main() {
     if (n > 0u) {
         bbar /= float(n);
     } else {
-        // No interior edge: only the face's own energy, kept definite by a tiny proximal term.
-        nmu = 1e-9 * w;
+        // No interior edge: only the face's own energy, kept definite by a proximal term (the
+        // CPU twin explains the 1e-3).
+        nmu = 1e-3 * w;
         bbar = a;
     }
 
     for (uint it = 0u; it < pc.newton_iters; ++it) {
+        // Isolated face: proximal centre at the current iterate (damping, not a pull back).
+        if (n == 0u) bbar = a;
         float e;
         vec4 g;
         energy_grad(pc.energy, a, e, g);
         if (!(e < INF)) break;
-        vec4 grad = w * g + nmu * (a - bbar);
+        vec4 pull = nmu * (a - bbar);
+        vec4 grad = w * g + pull;
         vec4 lam;
         vec4 modes[4];
         hessian_eigensystem(pc.energy, a, lam, modes);
         vec4 p = vec4(0.0);
         for (int k = 0; k < 4; ++k) {
-            p += (-dot(modes[k], grad) / (w * max(lam[k], 0.0) + nmu)) * modes[k];
+            // Twist and flip (modes 0, 1) are orthogonal to the energy gradient (rotation
+            // invariance): their components come from the penalty pull only, so f32 noise
+            // along a clamped twist is not divided by a tiny nμ (kernels::projected_newton_direction).
+            vec4 gk = k < 2 ? pull : grad;
+            p += (-dot(modes[k], gk) / (w * max(lam[k], 0.0) + nmu)) * modes[k];
         }
         float slope = dot(grad, p);
         if (!(slope < 0.0)) break;

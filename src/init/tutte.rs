@@ -11,10 +11,11 @@
 //! so a counter-clockwise mesh gives a counter-clockwise map (checked, and mirrored if not).
 //!
 //! Solvers: uniform weights give the graph Laplacian restricted to the interior (symmetric
-//! positive definite, boundary moved to the right-hand side): IC(0)-preconditioned CG.
-//! Mean-value weights are not symmetric: each row is normalised to a convex combination
-//! (u_i − Σ_j λ_ij u_j = 0, Σ_j λ_ij = 1), a diagonally dominant M-matrix solved by BiCGSTAB
-//! with ILU(0). Both UV columns share the matrix and are solved in parallel.
+//! positive definite, boundary moved to the right-hand side): CG. Mean-value weights are not
+//! symmetric: each row is normalised to a convex combination (u_i − Σ_j λ_ij u_j = 0,
+//! Σ_j λ_ij = 1), a diagonally dominant M-matrix: BiCGSTAB. Both are preconditioned by
+//! algebraic multigrid by default (about 20 iterations at 125k interior vertices, ~1 s in
+//! release), and both UV columns share the matrix and are solved in parallel.
 #![forbid(unsafe_code)]
 
 use sprs::TriMat;

@@ -68,7 +68,7 @@ fn efgh(m: &Mat2) -> [f64; 4] {
 /// when det < 0 (an orientation-reversing map), so σ1·σ2 = det.
 ///
 /// Closed form: σ1 = Q + R, σ2 = Q − R with Q = |conformal part| = √(E²+H²),
-/// R = |anti-conformal part| = √(F²+G²) (see [`efgh`]); no iteration, no square root of a
+/// R = |anti-conformal part| = √(F²+G²) (E, F, G, H as in `efgh`); no iteration, no square root of a
 /// difference, so it is accurate near σ1 = σ2.
 #[inline]
 pub fn svd2_signed_values(m: &Mat2) -> [f64; 2] {

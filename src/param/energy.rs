@@ -3,7 +3,7 @@
 //!
 //! Both energies are rotation-invariant and +∞ for `det A <= 0`, which is what makes every
 //! line search that only accepts finite values flip-proof. The GLSL twin is
-//! `glsl/common/energy.glsl`; keep the formulas in step.
+//! `glsl/common/admm.glsl`; keep the formulas in step.
 
 /// Which distortion the solver minimises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]

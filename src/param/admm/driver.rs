@@ -263,7 +263,11 @@ pub fn solve(
             }
             if small && flips == 0 {
                 converged = true;
-            } else if small && flips > 0 && opts.adaptive_mu && mu_rel * 2.0 <= opts.initial_mu_rel() * opts.mu_growth_max {
+            } else if small
+                && flips > 0
+                && opts.adaptive_mu
+                && mu_rel * 2.0 <= opts.initial_mu_rel() * opts.mu_growth_max
+            {
                 // Residuals are small but the consensus is not yet tight enough for a flip-free
                 // recovery: tighten it.
                 mu_rel *= 2.0;
@@ -286,7 +290,10 @@ pub fn solve(
         // Below the stability threshold of μ the iteration oscillates (primal ≈ dual, no
         // progress) and then diverges; above it, it converges monotonically. So: raise μ when
         // the primal residual is above tolerance and has made no new low for a while.
-        if opts.adaptive_mu && !converged && primal > opts.tol_primal && checks_since_best >= opts.stall_checks
+        if opts.adaptive_mu
+            && !converged
+            && primal > opts.tol_primal
+            && checks_since_best >= opts.stall_checks
             && mu_rel * 2.0 <= opts.initial_mu_rel() * opts.mu_growth_max
         {
             mu_rel *= 2.0;

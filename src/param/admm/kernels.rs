@@ -146,10 +146,16 @@ pub fn face_newton(
 ) -> [f64; 4] {
     let mut a = a;
     let nmu = n as f64 * mu;
-    // A face with no interior edge only has its own energy: a tiny proximal term keeps the
-    // system definite along MIPS's scale direction without moving the minimiser.
-    let (nmu, bbar) = if n == 0 { (1e-9 * w, a) } else { (nmu, bbar) };
+    // A face with no interior edge only has its own energy: a proximal term keeps the system
+    // definite along directions whose eigenvalue is clamped to 0 (MIPS's scale, a negative
+    // twist), large enough that f32 rounding in the gradient there cannot blow up the step.
+    let isolated = n == 0;
+    let (nmu, mut bbar) = if isolated { (1e-3 * w, a) } else { (nmu, bbar) };
     for _ in 0..iters {
+        if isolated {
+            // Proximal centre at the current iterate: a damping term only, not a pull back.
+            bbar = a;
+        }
         let (e, g, _) = energy::eval(energy, &a);
         if !e.is_finite() {
             break;
