@@ -666,3 +666,30 @@ fn successful_run_leaves_no_temp_files() {
         r.what
     );
 }
+
+/// The synthetic tetrahedral meshes (shipped beside the OBJ ones in ../shared) are refused with
+/// exit 2 and a message that says why, instead of "no faces".
+#[test]
+fn tet_mesh_input_is_refused_with_a_reason() {
+    let dir = std::env::temp_dir().join(format!("foldfree-cli-tet-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let input = dir.join("single_tet.mesh");
+    std::fs::write(
+        &input,
+        "MeshVersionFormatted 1\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\nTetrahedra\n1\n1 2 3 4 0\nEnd\n",
+    )
+    .expect("write input");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .args(["param", input.to_str().expect("utf8 path"), "-o"])
+        .arg(dir.join("out.obj"))
+        .output()
+        .expect("run foldfree");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("tetrahedral") && stderr.contains("single_tet.mesh"),
+        "{stderr}"
+    );
+    assert!(!dir.join("out.obj").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

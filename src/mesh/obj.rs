@@ -34,6 +34,27 @@ pub fn read_obj(path: &Path) -> Result<TriMesh, MeshError> {
 
 /// [`read_obj`] plus what was triangulated or skipped.
 pub fn read_obj_with_info(path: &Path) -> Result<(TriMesh, ObjInfo), MeshError> {
+    // Other mesh formats would parse as an OBJ with no faces; name them instead.
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if let Some(ext) = ext.as_deref() {
+        let what = match ext {
+            "mesh" | "node" | "ele" | "vtk" => {
+                Some("a tetrahedral mesh format; surface maps need a triangle mesh in OBJ")
+            }
+            "off" | "ply" | "stl" | "gltf" | "glb" | "fbx" => {
+                Some("not read by foldfree; convert the surface to OBJ")
+            }
+            _ => None,
+        };
+        if let Some(what) = what {
+            return Err(MeshError::Read {
+                file: path.to_path_buf(),
+                reason: format!("'.{ext}' is {what}"),
+            });
+        }
+    }
     let bytes = fs::read(path).map_err(|e| MeshError::Read {
         file: path.to_path_buf(),
         reason: e.to_string(),
