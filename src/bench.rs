@@ -38,7 +38,7 @@ pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<Bench
     })?;
     let mut rows = Vec::new();
     let mut table = String::from(
-        "| mesh | faces | energy | backend | iterations | converged | s/iteration | solve s | total s | δcon mean | SD | flips |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| mesh | faces | energy | backend | iterations | converged | s/iteration | MB/iteration | GB/s achieved | solve s | total s | δcon mean | SD | flips |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for mesh in &job.meshes {
         let stem = mesh
@@ -62,8 +62,15 @@ pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<Bench
                         } else {
                             0.0
                         };
+                        let (mb, gbs) = match r.bytes_per_iteration {
+                            Some(b) if per_it > 0.0 => (
+                                format!("{:.1}", b as f64 / 1e6),
+                                format!("{:.2}", b as f64 / per_it / 1e9),
+                            ),
+                            _ => (String::new(), String::new()),
+                        };
                         let line = format!(
-                            "| {stem} | {} | {} | {} ({}) | {} | {} | {:.4} | {:.2} | {:.2} | {:.4} | {:.4} | {} |",
+                            "| {stem} | {} | {} | {} ({}) | {} | {} | {:.4} | {mb} | {gbs} | {:.2} | {:.2} | {:.4} | {:.4} | {} |",
                             r.faces,
                             r.energy.clone().unwrap_or_default(),
                             r.backend,
@@ -97,4 +104,40 @@ pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<Bench
         }
     }
     Ok((rows, table))
+}
+
+/// Measured device memory bandwidth in GB/s: `y = a·x + y` over `n` floats (12 bytes moved per
+/// element), timed with GPU timestamps, best of `reps` dispatches. The ceiling the ADMM kernels'
+/// bytes per iteration are compared against in BENCHMARKS.md.
+pub fn device_bandwidth(ctx: &crate::gpu::Context, n: u32, reps: u32) -> Result<f64> {
+    use crate::gpu::{
+        shaders, Buffer, ComputePipeline, ComputePipelineDesc, DescriptorSet, Recorder,
+        TimestampPool,
+    };
+    #[repr(C)]
+    #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+    struct Push {
+        a: f32,
+        n: u32,
+    }
+    let words = shaders::words(shaders::TEST_SAXPY)?;
+    let pipe = ComputePipeline::new(ctx, &ComputePipelineDesc::new("bench.saxpy", &words, 2, 8))?;
+    let x = Buffer::from_slice(ctx, "bench.x", &vec![1.0f32; n as usize])?;
+    let y = Buffer::from_slice(ctx, "bench.y", &vec![0.5f32; n as usize])?;
+    let set = DescriptorSet::new(&pipe, "bench.saxpy.set", &[&x, &y])?;
+    let pool = TimestampPool::new(ctx, "bench.ts", 2)?;
+    let mut rec = Recorder::new(ctx, "bench.saxpy")?;
+    let mut best = f64::INFINITY;
+    for _ in 0..reps.max(1) {
+        rec.begin()?;
+        rec.write_timestamp(&pool, 0);
+        rec.bind(&pipe, &set);
+        rec.push(&Push { a: 2.0, n });
+        rec.dispatch_1d(n);
+        rec.write_timestamp(&pool, 1);
+        rec.submit_and_wait(std::time::Duration::from_secs(60))?;
+        let t = pool.read_ns()?;
+        best = best.min(t[1].saturating_sub(t[0]) as f64);
+    }
+    Ok(12.0 * f64::from(n) / best.max(1.0))
 }

@@ -133,6 +133,9 @@ struct ParamArgs {
     /// Checks without progress of the primal residual before μ is doubled.
     #[arg(long)]
     stall_checks: Option<usize>,
+    /// Residual balancing: halve μ when the dual residual dominates a tight consensus.
+    #[arg(long)]
+    balance: bool,
     /// Newton steps per face per iteration.
     #[arg(long)]
     newton_iters: Option<u32>,
@@ -252,6 +255,14 @@ fn run_bench(
         max_iters,
         out_dir,
     };
+    if job.backends.contains(&BackendChoice::Vulkan) {
+        let ctx = foldfree::gpu::Context::new(&foldfree::gpu::ContextDesc::default())?;
+        let gbs = foldfree::bench::device_bandwidth(&ctx, 1 << 24, 5)?;
+        println!(
+            "device: {} — measured bandwidth (saxpy, 16M floats, best of 5): {gbs:.2} GB/s\n",
+            ctx.device_name()
+        );
+    }
     let (_, table) = foldfree::bench::run_bench(&job, |line| eprintln!("{line}"))?;
     println!("{table}");
     Ok(())
@@ -301,6 +312,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     if let Some(n) = args.stall_checks {
         admm.stall_checks = n;
     }
+    admm.balance = args.balance;
     if let Some(n) = args.newton_iters {
         admm.newton_iters = n;
     }

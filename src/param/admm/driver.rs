@@ -69,8 +69,11 @@ pub struct AdmmOptions {
     pub adaptive_mu: bool,
     /// Checks without a new low (< 0.95× the best) of the primal residual before μ is raised.
     pub stall_checks: usize,
-    /// Upper bound of the adaptive μ, as a multiple of the initial μ.
+    /// Bound of the adaptive μ: within initial μ ×/÷ this factor.
     pub mu_growth_max: f64,
+    /// Halve μ when the primal residual is under tolerance and the dual residual is over 10×
+    /// it (at most once per `stall_checks` checks).
+    pub balance: bool,
     /// Set to stop early (Ctrl-C); the best flip-free map so far is returned.
     pub stop: Option<Arc<AtomicBool>>,
 }
@@ -91,6 +94,7 @@ impl AdmmOptions {
             adaptive_mu: true,
             stall_checks: 8,
             mu_growth_max: 64.0,
+            balance: false,
             stop: None,
         }
     }
@@ -209,6 +213,7 @@ pub fn solve(
     // checks ago it was set.
     let mut best_primal = f64::INFINITY;
     let mut checks_since_best = 0usize;
+    let mut checks_since_change = 0usize;
     let mut since_resync = 0usize;
     while it < opts.max_iters {
         if opts
@@ -299,6 +304,22 @@ pub fn solve(
             mu_rel *= 2.0;
             best_primal = primal;
             checks_since_best = 0;
+            checks_since_change = 0;
+        } else if opts.balance
+            && !converged
+            && primal < opts.tol_primal
+            && dual > 10.0 * primal
+            && checks_since_change >= opts.stall_checks
+            && mu_rel / 2.0 >= opts.initial_mu_rel() / opts.mu_growth_max
+        {
+            // Residual balancing (Boyd et al. 2011, §3.4.1) in its safe half: the consensus is
+            // already tight and the dual residual dominates, so a smaller μ lets the energy move.
+            mu_rel /= 2.0;
+            best_primal = primal;
+            checks_since_best = 0;
+            checks_since_change = 0;
+        } else {
+            checks_since_change += 1;
         }
         progress(&h);
         history.push(h);
