@@ -133,9 +133,10 @@ struct ParamArgs {
     /// Checks without progress of the primal residual before μ is doubled.
     #[arg(long)]
     stall_checks: Option<usize>,
-    /// Residual balancing: halve μ when the dual residual dominates a tight consensus.
+    /// No residual balancing (by default μ is halved when the dual residual dominates a tight
+    /// consensus).
     #[arg(long)]
-    balance: bool,
+    no_balance: bool,
     /// Newton steps per face per iteration.
     #[arg(long)]
     newton_iters: Option<u32>,
@@ -312,7 +313,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     if let Some(n) = args.stall_checks {
         admm.stall_checks = n;
     }
-    admm.balance = args.balance;
+    admm.balance = !args.no_balance;
     if let Some(n) = args.newton_iters {
         admm.newton_iters = n;
     }

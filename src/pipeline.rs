@@ -188,6 +188,17 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
             None
         };
         let ctx = choose_backend(job)?;
+        let mut solve = |exec: &mut dyn admm::driver::Executor| {
+            admm::solve(
+                &problem,
+                &mesh.faces,
+                &uv,
+                fallback.as_deref(),
+                &job.admm,
+                exec,
+                progress,
+            )
+        };
         let result = match &ctx {
             Some(ctx) => {
                 let mut exec = admm::vulkan::VulkanExecutor::new(
@@ -195,17 +206,9 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
                     &problem,
                     job.admm.energy,
                     job.admm.newton_iters,
-                    false,
+                    job.profile,
                 )?;
-                let r = admm::solve(
-                    &problem,
-                    &mesh.faces,
-                    &uv,
-                    fallback.as_deref(),
-                    &job.admm,
-                    &mut exec,
-                    progress,
-                )?;
+                let r = solve(&mut exec)?;
                 report.kernel_times = exec.kernel_times().cloned();
                 report.bytes_per_iteration = Some(exec.bytes_per_iteration());
                 let messages = ctx.take_validation_messages();
@@ -222,15 +225,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
             None => {
                 let mut exec =
                     admm::cpu::CpuExecutor::new(&problem, job.admm.energy, job.admm.newton_iters);
-                admm::solve(
-                    &problem,
-                    &mesh.faces,
-                    &uv,
-                    fallback.as_deref(),
-                    &job.admm,
-                    &mut exec,
-                    progress,
-                )?
+                solve(&mut exec)?
             }
         };
         uv = result.uv;

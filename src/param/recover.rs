@@ -53,17 +53,10 @@ impl LeastSquaresRecovery {
         let mut grads = Vec::with_capacity(faces.len());
         let mut tri = TriMat::new((free.len(), free.len()));
         for (f, face) in faces.iter().enumerate() {
-            let l = &problem.local[f];
-            let (m00, m01, m10, m11) = (
-                l[1][0] - l[0][0],
-                l[2][0] - l[0][0],
-                l[1][1] - l[0][1],
-                l[2][1] - l[0][1],
-            );
-            let det = m00 * m11 - m01 * m10;
-            // Hat-function gradients: g1 = M⁻ᵀ(1,0), g2 = M⁻ᵀ(0,1), g0 = −g1 − g2.
-            let g1 = [m11 / det, -m01 / det];
-            let g2 = [-m10 / det, m00 / det];
+            // Hat-function gradients: g1, g2 are the rows of M⁻¹, g0 = −g1 − g2.
+            let inv = problem.frame_inverse(f);
+            let g1 = [inv[0], inv[1]];
+            let g2 = [inv[2], inv[3]];
             let g0 = [-g1[0] - g2[0], -g1[1] - g2[1]];
             let g = [g0, g1, g2];
             let area = problem.area[f];

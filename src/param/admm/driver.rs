@@ -89,12 +89,12 @@ impl AdmmOptions {
             newton_iters: 1,
             tol_primal: 1e-4,
             tol_dual: 1e-4,
-            tol_energy: 1e-5,
+            tol_energy: 1e-6,
             resync_every: 0,
             adaptive_mu: true,
             stall_checks: 8,
             mu_growth_max: 64.0,
-            balance: false,
+            balance: true,
             stop: None,
         }
     }

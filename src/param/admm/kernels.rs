@@ -17,17 +17,16 @@ pub const FLIP_FREE_FRACTION: f64 = 0.9;
 /// Signed SVD of a 2x2 `A = U diag(σ1, σ2) Vᵀ` with rotations `U = rot(φ)`, `Vᵀ = rot(θ)`,
 /// σ1 ≥ |σ2| (σ2 < 0 iff det A < 0). Returned as `(cos φ, sin φ, σ1, σ2, cos θ, sin θ)`.
 pub fn svd2(a: &[f64; 4]) -> [f64; 6] {
-    let e = 0.5 * (a[0] + a[3]);
-    let f = 0.5 * (a[0] - a[3]);
-    let g = 0.5 * (a[2] + a[1]);
-    let h = 0.5 * (a[2] - a[1]);
-    let q = e.hypot(h);
-    let r = f.hypot(g);
-    let a1 = g.atan2(f);
-    let a2 = h.atan2(e);
-    let theta = 0.5 * (a2 - a1);
-    let phi = 0.5 * (a2 + a1);
-    [phi.cos(), phi.sin(), q + r, q - r, theta.cos(), theta.sin()]
+    // small::svd2_signed gives U = R(φ), V = R(−θ), so Vᵀ = R(θ): cos θ = V₀₀, sin θ = V₀₁.
+    let svd = crate::linalg::small::svd2_signed(&[[a[0], a[1]], [a[2], a[3]]]);
+    [
+        svd.u[0][0],
+        svd.u[1][0],
+        svd.sigma[0],
+        svd.sigma[1],
+        svd.v[0][0],
+        svd.v[0][1],
+    ]
 }
 
 /// `U X Vᵀ` for `U = rot(φ)`, `Vᵀ = rot(θ)` given as cos/sin pairs; row-major.

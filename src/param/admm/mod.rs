@@ -95,10 +95,9 @@ impl AdmmProblem {
         self.slot_face.len()
     }
 
-    /// Jacobian of face `f` under the per-vertex map `uv`: `A = [u1−u0, u2−u0] · M⁻¹`,
-    /// `M = [l1−l0, l2−l0]` (local corner coordinates as columns).
-    pub fn jacobian(&self, faces: &[[u32; 3]], uv: &[[f64; 2]], f: usize) -> [f64; 4] {
-        let [i0, i1, i2] = faces[f].map(|i| i as usize);
+    /// `M⁻¹` (row-major) for `M = [l1−l0, l2−l0]`, the face's local corner offsets as columns.
+    /// Its rows are the gradients of the hat functions of corners 1 and 2 in the face's frame.
+    pub fn frame_inverse(&self, f: usize) -> [f64; 4] {
         let l = &self.local[f];
         let (m00, m01, m10, m11) = (
             l[1][0] - l[0][0],
@@ -107,7 +106,13 @@ impl AdmmProblem {
             l[2][1] - l[0][1],
         );
         let det = m00 * m11 - m01 * m10;
-        let inv = [m11 / det, -m01 / det, -m10 / det, m00 / det];
+        [m11 / det, -m01 / det, -m10 / det, m00 / det]
+    }
+
+    /// Jacobian of face `f` under the per-vertex map `uv`: `A = [u1−u0, u2−u0] · M⁻¹`.
+    pub fn jacobian(&self, faces: &[[u32; 3]], uv: &[[f64; 2]], f: usize) -> [f64; 4] {
+        let [i0, i1, i2] = faces[f].map(|i| i as usize);
+        let inv = self.frame_inverse(f);
         let du = [uv[i1][0] - uv[i0][0], uv[i2][0] - uv[i0][0]];
         let dv = [uv[i1][1] - uv[i0][1], uv[i2][1] - uv[i0][1]];
         [

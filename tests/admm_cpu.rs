@@ -1,0 +1,138 @@
+//! Properties of the ADMM driver on the CPU backend: whatever the settings, the returned map is
+//! flip-free; a stop request is honoured; on a flat mesh the answer is exact.
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use foldfree::init::tutte::TutteWeights;
+use foldfree::mesh::{self, Topology, TriMesh};
+use foldfree::param::admm::{self, cpu::CpuExecutor, driver::map_energy, AdmmOptions, AdmmProblem};
+use foldfree::param::Energy;
+use foldfree::pipeline::{initial_map, normalize_area, InitMethod};
+
+fn load(name: &str) -> (TriMesh, Topology, AdmmProblem) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name);
+    let (m, t, _) = mesh::load(&path, &mesh::ValidateOptions::default()).expect("test mesh loads");
+    let frames = mesh::frames::compute(&m);
+    let p = AdmmProblem::new(&m, &t, &frames);
+    (m, t, p)
+}
+
+fn start(m: &TriMesh, t: &Topology, init: InitMethod) -> Vec<[f64; 2]> {
+    let mut uv = initial_map(m, t, init).expect("start map");
+    let area: f64 = mesh::frames::compute(m).area.iter().sum();
+    normalize_area(m, &mut uv, area);
+    uv
+}
+
+/// An unstable penalty (μ·F = 0.1, no adaptation) on the hard camel still returns a flip-free
+/// map: the best flip-free recovered map, or the Tutte fallback.
+#[test]
+fn unstable_penalty_still_returns_a_flip_free_map() {
+    let (m, t, p) = load("camel_open.obj");
+    let lscm = start(&m, &t, InitMethod::Lscm);
+    let tutte = start(&m, &t, InitMethod::Tutte(TutteWeights::Uniform));
+    for energy in [Energy::Mips, Energy::SymmetricDirichlet] {
+        let mut o = AdmmOptions::for_energy(energy);
+        o.mu_rel = Some(0.1);
+        o.adaptive_mu = false;
+        o.max_iters = 200;
+        let mut exec = CpuExecutor::new(&p, energy, 1);
+        let r = admm::solve(
+            &p,
+            &m.faces,
+            &lscm,
+            Some(&tutte),
+            &o,
+            &mut exec,
+            &mut |_| {},
+        )
+        .expect("solve");
+        let (e, flips) = map_energy(&p, &m.faces, &r.uv, energy);
+        assert_eq!(flips, 0, "{energy:?}: returned map flips");
+        assert_eq!(r.flips, 0);
+        assert!(e.is_finite());
+        assert!(r.uv.iter().all(|q| q[0].is_finite() && q[1].is_finite()));
+    }
+}
+
+/// A stop flag set before the first batch ends the solve after one batch with `interrupted`,
+/// returning a flip-free map.
+#[test]
+fn stop_flag_interrupts_and_keeps_a_flip_free_map() {
+    let (m, t, p) = load("camel_open.obj");
+    let lscm = start(&m, &t, InitMethod::Lscm);
+    let tutte = start(&m, &t, InitMethod::Tutte(TutteWeights::Uniform));
+    let mut o = AdmmOptions::for_energy(Energy::Mips);
+    o.stop = Some(Arc::new(AtomicBool::new(true)));
+    let mut exec = CpuExecutor::new(&p, Energy::Mips, 1);
+    let r = admm::solve(
+        &p,
+        &m.faces,
+        &lscm,
+        Some(&tutte),
+        &o,
+        &mut exec,
+        &mut |_| {},
+    )
+    .expect("solve");
+    assert!(r.interrupted && !r.converged);
+    assert_eq!(r.iterations, 0);
+    assert_eq!(map_energy(&p, &m.faces, &r.uv, Energy::Mips).1, 0);
+}
+
+/// A flat square from its (distorted) Tutte map: with tight tolerances ADMM finds the isometry
+/// up to similarity for both energies and says it converged.
+#[test]
+fn flat_grid_converges_to_the_exact_answer_from_tutte() {
+    let (m, t, p) = load("square_grid_10x10.obj");
+    let tutte = start(&m, &t, InitMethod::Tutte(TutteWeights::Uniform));
+    for energy in [Energy::Mips, Energy::SymmetricDirichlet] {
+        let mut o = AdmmOptions::for_energy(energy);
+        o.tol_energy = 1e-9;
+        o.max_iters = 6000;
+        let mut exec = CpuExecutor::new(&p, energy, 1);
+        let r = admm::solve(&p, &m.faces, &tutte, None, &o, &mut exec, &mut |_| {}).expect("solve");
+        let metrics = foldfree::metrics::evaluate(&m.positions, &m.faces, &r.uv, &t.boundary_loops);
+        assert!(
+            r.converged,
+            "{energy:?} did not converge in {} iterations",
+            r.iterations
+        );
+        assert_eq!(metrics.flips, 0);
+        assert!(
+            metrics.delta_con_max < 1.001,
+            "{energy:?}: δ max {}",
+            metrics.delta_con_max
+        );
+        assert!(
+            metrics.sd_energy < 4.0 + 1e-4,
+            "{energy:?}: SD {}",
+            metrics.sd_energy
+        );
+    }
+}
+
+/// The first residual check of the iteration is the same whether the iteration is run by the
+/// CPU executor in one batch or step by step through `cpu::iteration` (the executor adds no
+/// hidden state).
+#[test]
+fn executor_batches_equal_single_iterations() {
+    use foldfree::param::admm::driver::Executor;
+    let (m, t, p) = load("camel_open.obj");
+    let lscm = start(&m, &t, InitMethod::Lscm);
+    let s0 = admm::AdmmState::from_uv(&p, &m.faces, &lscm);
+    let mu = 100.0 / p.n_faces() as f64;
+    let mut exec = CpuExecutor::new(&p, Energy::SymmetricDirichlet, 1);
+    exec.upload(&s0).expect("upload");
+    exec.iterate(5, mu).expect("iterate");
+    let batched = exec.download().expect("download");
+    let mut s = s0.clone();
+    for _ in 0..5 {
+        admm::cpu::iteration(&p, &mut s, Energy::SymmetricDirichlet, 1, mu);
+    }
+    assert_eq!(batched, s);
+}
