@@ -40,9 +40,16 @@ void energy_grad(uint kind, vec4 a, out float e, out vec4 g) {
     }
 }
 
-// atan(y, x) is undefined in GLSL at (0, 0); the angle there is arbitrary, so pick 0.
-float atan2_safe(float y, float x) {
-    return (x == 0.0 && y == 0.0) ? 0.0 : atan(y, x);
+// (cos, sin) of half the angle of the unit vector (c, s), half angle in (−π/2, π/2]
+// (CPU twin: kernels::half_angle). No trigonometric calls.
+vec2 half_angle(float c, float s) {
+    if (c >= 0.0) {
+        float ch = sqrt(0.5 * (1.0 + c));
+        return vec2(ch, s / (2.0 * ch));
+    }
+    float sh = sqrt(0.5 * (1.0 - c));
+    float ch = s / (2.0 * sh);
+    return ch >= 0.0 ? vec2(ch, sh) : vec2(-ch, -sh);
 }
 
 // U X Vᵀ for U = rot(φ), Vᵀ = rot(θ) given as (cos, sin); row-major vec4.
@@ -62,12 +69,12 @@ void hessian_eigensystem(uint kind, vec4 a, out vec4 lam, out vec4 modes[4]) {
     float h = 0.5 * (a.z - a.y);
     float q = length(vec2(e, h));
     float r = length(vec2(f, g));
-    float a1 = atan2_safe(g, f);
-    float a2 = atan2_safe(h, e);
-    float theta = 0.5 * (a2 - a1);
-    float phi = 0.5 * (a2 + a1);
-    vec2 u = vec2(cos(phi), sin(phi));
-    vec2 vt = vec2(cos(theta), sin(theta));
+    // Signed SVD without trigonometry (CPU twin: kernels::svd2): a1 = ∠(f, g), a2 = ∠(e, h),
+    // φ = (a1 + a2)/2 by a half angle, θ = φ − a1.
+    vec2 u1 = r > 0.0 ? vec2(f, g) / r : vec2(1.0, 0.0);
+    vec2 u2 = q > 0.0 ? vec2(e, h) / q : vec2(1.0, 0.0);
+    vec2 u = half_angle(u1.x * u2.x - u1.y * u2.y, u1.y * u2.x + u1.x * u2.y);
+    vec2 vt = vec2(u.x * u1.x + u.y * u1.y, u.y * u1.x - u.x * u1.y);
     float s1 = q + r;
     float s2 = q - r;
     float p12 = s1 * s2;
@@ -87,9 +94,12 @@ void hessian_eigensystem(uint kind, vec4 a, out vec4 lam, out vec4 modes[4]) {
         h22 = 2.0 + 6.0 / (s2 * s2 * s2 * s2);
         h12 = 0.0;
     }
-    float psi = 0.5 * atan2_safe(2.0 * h12, h11 - h22);
-    float c = cos(psi);
-    float s = sin(psi);
+    // Rotation ψ with tan 2ψ = 2 h12 / (h11 − h22), by a half angle.
+    vec2 d = vec2(h11 - h22, 2.0 * h12);
+    float dn = length(d);
+    vec2 cs = dn > 0.0 ? half_angle(d.x / dn, d.y / dn) : vec2(1.0, 0.0);
+    float c = cs.x;
+    float s = cs.y;
     float l1 = h11 * c * c + 2.0 * h12 * s * c + h22 * s * s;
     float l2 = h11 * s * s - 2.0 * h12 * s * c + h22 * c * c;
     const float R = 0.70710678118654752;

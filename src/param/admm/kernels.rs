@@ -14,19 +14,45 @@ pub const ARMIJO: f64 = 1e-4;
 /// valid step: it makes the face degenerate).
 pub const FLIP_FREE_FRACTION: f64 = 0.9;
 
+/// `(cos x, sin x)` of half the angle whose cosine and sine are `(c, s)` (unit vector), taking
+/// the half angle in (−π/2, π/2]; each branch divides by the larger of the two results.
+pub fn half_angle(c: f64, s: f64) -> [f64; 2] {
+    if c >= 0.0 {
+        let ch = (0.5 * (1.0 + c)).sqrt();
+        [ch, s / (2.0 * ch)]
+    } else {
+        let sh = (0.5 * (1.0 - c)).sqrt();
+        // s/(2 sh) is cos(x/2); its sign follows s, so flip both to keep cos ≥ 0.
+        let ch = s / (2.0 * sh);
+        if ch >= 0.0 {
+            [ch, sh]
+        } else {
+            [-ch, -sh]
+        }
+    }
+}
+
 /// Signed SVD of a 2x2 `A = U diag(σ1, σ2) Vᵀ` with rotations `U = rot(φ)`, `Vᵀ = rot(θ)`,
 /// σ1 ≥ |σ2| (σ2 < 0 iff det A < 0). Returned as `(cos φ, sin φ, σ1, σ2, cos θ, sin θ)`.
+///
+/// With E, F, G, H the conformal / anti-conformal parts, `a1 = ∠(F, G)`, `a2 = ∠(E, H)`:
+/// `φ = (a1 + a2)/2`, `θ = φ − a1`. Computed without trigonometric calls (half-angle of the
+/// sum, then a rotation), which were 30% of the face step; the GLSL twin does the same.
 pub fn svd2(a: &[f64; 4]) -> [f64; 6] {
-    // small::svd2_signed gives U = R(φ), V = R(−θ), so Vᵀ = R(θ): cos θ = V₀₀, sin θ = V₀₁.
-    let svd = crate::linalg::small::svd2_signed(&[[a[0], a[1]], [a[2], a[3]]]);
-    [
-        svd.u[0][0],
-        svd.u[1][0],
-        svd.sigma[0],
-        svd.sigma[1],
-        svd.v[0][0],
-        svd.v[0][1],
-    ]
+    let e = 0.5 * (a[0] + a[3]);
+    let f = 0.5 * (a[0] - a[3]);
+    let g = 0.5 * (a[2] + a[1]);
+    let h = 0.5 * (a[2] - a[1]);
+    let q = (e * e + h * h).sqrt();
+    let r = (f * f + g * g).sqrt();
+    // Unit vectors of a1 and a2; an arbitrary angle (0) where the part vanishes.
+    let (c1, s1) = if r > 0.0 { (f / r, g / r) } else { (1.0, 0.0) };
+    let (c2, s2) = if q > 0.0 { (e / q, h / q) } else { (1.0, 0.0) };
+    let [cp, sp] = half_angle(c1 * c2 - s1 * s2, s1 * c2 + c1 * s2);
+    // θ = φ − a1.
+    let ct = cp * c1 + sp * s1;
+    let st = sp * c1 - cp * s1;
+    [cp, sp, q + r, q - r, ct, st]
 }
 
 /// `U X Vᵀ` for `U = rot(φ)`, `Vᵀ = rot(θ)` given as cos/sin pairs; row-major.
@@ -78,9 +104,14 @@ pub fn hessian_eigensystem(energy: Energy, a: &[f64; 4]) -> ([f64; 4], [[f64; 4]
             )
         }
     };
-    // 2x2 symmetric [h11 h12; h12 h22] by one rotation ψ.
-    let psi = 0.5 * (2.0 * h12).atan2(h11 - h22);
-    let (c, s) = (psi.cos(), psi.sin());
+    // 2x2 symmetric [h11 h12; h12 h22] by one rotation ψ, tan 2ψ = 2 h12 / (h11 − h22).
+    let (dx, dy) = (h11 - h22, 2.0 * h12);
+    let n = (dx * dx + dy * dy).sqrt();
+    let [c, s] = if n > 0.0 {
+        half_angle(dx / n, dy / n)
+    } else {
+        [1.0, 0.0]
+    };
     let l1 = h11 * c * c + 2.0 * h12 * s * c + h22 * s * s;
     let l2 = h11 * s * s - 2.0 * h12 * s * c + h22 * c * c;
     let r = std::f64::consts::FRAC_1_SQRT_2;
@@ -330,6 +361,9 @@ mod tests {
             [3.0, 1.0, 1.0, -2.0],
         ] {
             let [cu, su, s1, s2, cv, sv] = svd2(&a);
+            assert!(
+                (cu * cu + su * su - 1.0).abs() < 1e-12 && (cv * cv + sv * sv - 1.0).abs() < 1e-12
+            );
             let r = rotate([cu, su], [s1, 0.0, 0.0, s2], [cv, sv]);
             for i in 0..4 {
                 assert!((r[i] - a[i]).abs() < 1e-12);
