@@ -4,6 +4,9 @@
 
 use rayon::prelude::*;
 
+/// Elements per partial sum in [`residuals`] (fixed, so the summation order is too).
+const SUM_CHUNK: usize = 4096;
+
 use super::driver::{Executor, Residuals};
 use super::kernels;
 use super::{AdmmProblem, AdmmState, NO_SLOT};
@@ -114,23 +117,35 @@ pub fn residuals(
     a_prev: &[[f64; 4]],
     energy: Energy,
 ) -> Residuals {
-    let slot_sums = (0..problem.n_slots())
+    // Fixed chunks summed in order: a rayon `reduce` would combine partial sums in an order that
+    // depends on work stealing, and the driver's μ decisions compare these sums, so runs would
+    // not be reproducible bit for bit.
+    let ns = problem.n_slots();
+    let slot_sums = (0..ns.div_ceil(SUM_CHUNK))
         .into_par_iter()
-        .map(|s| {
-            let f = problem.slot_face[s] as usize;
-            let (a, y, ap) = (&state.a[f], &state.y[s], &a_prev[f]);
+        .map(|c| {
             let mut r = [0.0; 3];
-            for i in 0..4 {
-                r[0] += (y[i] - a[i]).powi(2);
-                r[1] += (a[i] - ap[i]).powi(2);
-                r[2] += a[i] * a[i];
+            for s in c * SUM_CHUNK..((c + 1) * SUM_CHUNK).min(ns) {
+                let f = problem.slot_face[s] as usize;
+                let (a, y, ap) = (&state.a[f], &state.y[s], &a_prev[f]);
+                for i in 0..4 {
+                    r[0] += (y[i] - a[i]).powi(2);
+                    r[1] += (a[i] - ap[i]).powi(2);
+                    r[2] += a[i] * a[i];
+                }
             }
             r
         })
-        .reduce(|| [0.0; 3], |x, y| [x[0] + y[0], x[1] + y[1], x[2] + y[2]]);
-    let energy_sum = (0..problem.n_faces())
-        .into_par_iter()
-        .map(|f| problem.weight[f] * energy::value(energy, &state.a[f]))
+        .collect::<Vec<_>>()
+        .iter()
+        .fold([0.0; 3], |x, y| [x[0] + y[0], x[1] + y[1], x[2] + y[2]]);
+    let energy_sum: f64 = state
+        .a
+        .par_chunks(SUM_CHUNK)
+        .zip(problem.weight.par_chunks(SUM_CHUNK))
+        .map(|(a, w)| a.iter().zip(w).map(|(a, w)| w * energy::value(energy, a)).sum::<f64>())
+        .collect::<Vec<_>>()
+        .iter()
         .sum();
     Residuals {
         primal2: slot_sums[0],
