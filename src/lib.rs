@@ -15,5 +15,6 @@ pub mod metrics;
 pub mod param;
 pub mod pipeline;
 pub mod report;
+pub mod viz;
 
 pub use error::{Error, Result};

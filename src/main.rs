@@ -108,7 +108,7 @@ struct ParamArgs {
     /// Vulkan device: a substring of its name or its index (see `foldfree devices`).
     #[arg(long)]
     device: Option<String>,
-    /// ADMM penalty as μ·#faces (default: 100 for MIPS, 300 for SD; raised automatically when
+    /// ADMM penalty as μ·#faces (default: 100 for MIPS, 1000 for SD; adapted automatically when
     /// the iteration oscillates).
     #[arg(long)]
     mu: Option<f64>,

@@ -103,7 +103,7 @@ impl AdmmOptions {
     pub fn initial_mu_rel(&self) -> f64 {
         self.mu_rel.unwrap_or(match self.energy {
             Energy::Mips => 100.0,
-            Energy::SymmetricDirichlet => 300.0,
+            Energy::SymmetricDirichlet => 1000.0,
         })
     }
 }
