@@ -576,7 +576,7 @@ fn obj_tolerates_crlf_tabs_bom_trailing_comments_and_continuations() {
 #[test]
 fn obj_face_with_two_vertices_names_the_line() {
     let reason = read_err_reason(b"v 0 0 0\nv 1 0 0\nv 0 1 0\n# c\nf 1 2\n");
-    assert_eq!(reason, "line 5: face has 2 vertices");
+    assert_eq!(reason, "line 5: face has 2 vertices, need at least 3");
 }
 
 #[test]

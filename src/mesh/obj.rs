@@ -92,6 +92,12 @@ pub fn parse_obj_with_info(
     // Records may continue over several physical lines with a trailing backslash.
     let mut joined = String::new();
     let mut record_line = 0usize;
+    // Lines end in \n, \r\n or a lone \r (classic Mac OS files): normalise to \n.
+    let text: std::borrow::Cow<'_, str> = if text.contains('\r') {
+        std::borrow::Cow::Owned(text.replace("\r\n", "\n").replace('\r', "\n"))
+    } else {
+        std::borrow::Cow::Borrowed(&text[..])
+    };
     for (i, line) in text.lines().enumerate() {
         let line_no = i + 1;
         if let Some(head) = line.trim_end().strip_suffix('\\') {
@@ -227,12 +233,15 @@ impl Parser<'_> {
         self.corners.clear();
         for tok in tokens {
             let head = tok.split('/').next().unwrap_or(tok);
-            let written: i64 = head.parse().map_err(|_| {
-                read_error(
-                    self.file,
-                    line_no,
-                    format!("face vertex {tok:?} does not start with an integer index"),
-                )
+            let written: i64 = head.parse().map_err(|e: std::num::ParseIntError| {
+                let msg = match e.kind() {
+                    // All digits, just too many of them: say so rather than "not an integer".
+                    std::num::IntErrorKind::PosOverflow | std::num::IntErrorKind::NegOverflow => {
+                        format!("face vertex index {head} is out of range (more than 64 bits)")
+                    }
+                    _ => format!("face vertex {tok:?} does not start with an integer index"),
+                };
+                read_error(self.file, line_no, msg)
             })?;
             let out_of_range = || MeshError::IndexOutOfRange {
                 file: self.file.to_path_buf(),
@@ -263,7 +272,10 @@ impl Parser<'_> {
             return Err(read_error(
                 self.file,
                 line_no,
-                format!("face has {n} vertices"),
+                format!(
+                    "face has {n} {}, need at least 3",
+                    if n == 1 { "vertex" } else { "vertices" }
+                ),
             ));
         }
         self.info.source_face_count += 1;

@@ -1,0 +1,525 @@
+//! The malformed-input corpus (tests/data/bad, described row by row in its README.md) through the
+//! `foldfree` binary: `param FILE -o OUT --init tutte --solver none` and `stats FILE` on every
+//! file in the directory. Bad input exits 2 with exactly one stderr line
+//! `foldfree: error: FILE: …` and writes nothing; valid input exits 0; nothing panics or hangs.
+//!
+//! The directory is listed, not the table, so a new file without a table row fails the test.
+//! Two regression tests below pin bugs this corpus found (an index beyond i64 was called "not an
+//! integer"; CR-only line endings made a file look empty).
+
+use std::collections::BTreeSet;
+use std::fs;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::thread;
+use std::time::{Duration, Instant};
+
+/// A run that takes longer is a hang: the child is killed and the case fails.
+const TIMEOUT: Duration = Duration::from_secs(20);
+
+/// What one command must do with one file.
+#[derive(Clone, Copy, Debug)]
+enum Expect {
+    /// Exit 0.
+    Valid,
+    /// This exit code, and one stderr line `foldfree: error: FILE: …` containing the fragment.
+    Error(i32, &'static str),
+}
+
+use Expect::{Error, Valid};
+
+struct Case {
+    file: &'static str,
+    param: Expect,
+    stats: Expect,
+}
+
+/// Bad for both commands, exit 2.
+const fn bad(file: &'static str, fragment: &'static str) -> Case {
+    Case {
+        file,
+        param: Error(2, fragment),
+        stats: Error(2, fragment),
+    }
+}
+
+/// Valid for both commands.
+const fn valid(file: &'static str) -> Case {
+    Case {
+        file,
+        param: Valid,
+        stats: Valid,
+    }
+}
+
+/// A valid mesh that is not a disk: `stats` describes it, `param` refuses it.
+const fn not_disk(file: &'static str, fragment: &'static str) -> Case {
+    Case {
+        file,
+        param: Error(2, fragment),
+        stats: Valid,
+    }
+}
+
+/// One row per file in tests/data/bad (same order as its README).
+const CASES: &[Case] = &[
+    bad(
+        "binary_garbage.obj",
+        "cannot read: line 1: binary data (byte 0x1a), not an OBJ text file",
+    ),
+    bad(
+        "non_utf8_bytes.obj",
+        "cannot read: line 4: not UTF-8 text (binary file?)",
+    ),
+    bad("empty_0_bytes.obj", "the mesh has no faces"),
+    bad("only_comments.obj", "the mesh has no faces"),
+    bad("no_faces.obj", "the mesh has no faces"),
+    bad(
+        "truncated_mid_line.obj",
+        "cannot read: line 8: vertex coordinate \"1.25e\" is not a number",
+    ),
+    bad(
+        "truncated_mid_face.obj",
+        "cannot read: line 7: face has 2 vertices",
+    ),
+    bad(
+        "vertex_with_two_coordinates.obj",
+        "cannot read: line 3: vertex has 2 coordinates, need 3",
+    ),
+    bad(
+        "trailing_garbage_after_number.obj",
+        "cannot read: line 3: vertex coordinate \"3abc\" is not a number",
+    ),
+    bad(
+        "trailing_garbage_after_index.obj",
+        "cannot read: line 5: face vertex \"3x\" does not start with an integer index",
+    ),
+    bad(
+        "nan_coordinate.obj",
+        "vertex 1 has a non-finite coordinate (NaN)",
+    ),
+    bad(
+        "inf_coordinate.obj",
+        "vertex 2 has a non-finite coordinate (inf)",
+    ),
+    bad(
+        "overflowing_coordinate_1e400.obj",
+        "vertex 1 has a non-finite coordinate (inf)",
+    ),
+    bad(
+        "index_zero.obj",
+        "cannot read: line 5: face vertex index 0 (OBJ indices start at 1)",
+    ),
+    bad(
+        "huge_index.obj",
+        "face 0 refers to vertex 99999999999, but there are only 3 vertices",
+    ),
+    bad(
+        "index_overflows_i64.obj",
+        "face vertex index 99999999999999999999999 is out of range",
+    ),
+    bad(
+        "negative_index_before_start.obj",
+        "face 0 refers to vertex -10, but there are only 3 vertices",
+    ),
+    // "1 vertices": the fragment stops before the plural so a grammar fix does not break it.
+    bad(
+        "face_with_one_vertex.obj",
+        "cannot read: line 5: face has 1 vert",
+    ),
+    bad(
+        "face_with_two_vertices.obj",
+        "cannot read: line 5: face has 2 vertices",
+    ),
+    bad("face_repeated_vertex.obj", "face 0 uses vertex 1 twice"),
+    valid("quad_valid.obj"),
+    valid("pentagon_valid.obj"),
+    bad("duplicate_face.obj", "face 2 is a duplicate of face 0"),
+    bad(
+        "duplicate_face_reversed.obj",
+        "face 2 is a duplicate of face 0",
+    ),
+    bad(
+        "nonmanifold_edge_three_faces.obj",
+        "edge (0, 1) is non-manifold: it is shared by 3 faces (faces [0, 1, 2])",
+    ),
+    bad(
+        "nonmanifold_bowtie_vertex.obj",
+        "vertex 0 is non-manifold: its faces form 2 separate fans",
+    ),
+    bad(
+        "inconsistent_orientation.obj",
+        "inconsistent orientation: faces 0 and 1 traverse edge (0, 1) in the same direction",
+    ),
+    bad(
+        "zero_area_face.obj",
+        "face 2 is degenerate (area 0.000e0, below",
+    ),
+    bad(
+        "needle_face_below_tolerance.obj",
+        "face 2 is degenerate (area 5.000e-13, below 2.000e-12",
+    ),
+    valid("needle_face_above_tolerance.obj"),
+    not_disk(
+        "two_disjoint_disks.obj",
+        "not a disk: 2 components with 2 boundary loops in total",
+    ),
+    not_disk(
+        "closed_tetrahedron.obj",
+        "not a disk: closed surface of genus 0",
+    ),
+    valid("very_long_line.obj"),
+    valid("crlf_line_endings.obj"),
+    valid("cr_only_line_endings.obj"),
+    valid("utf8_bom.obj"),
+];
+
+fn bad_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bad")
+}
+
+/// The corpus files (everything in the directory but README.md), sorted.
+fn corpus_files() -> BTreeSet<String> {
+    fs::read_dir(bad_dir())
+        .expect("list tests/data/bad")
+        .map(|e| {
+            e.expect("read a tests/data/bad entry")
+                .file_name()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .filter(|n| n != "README.md")
+        .collect()
+}
+
+fn case(file: &str) -> &'static Case {
+    CASES
+        .iter()
+        .find(|c| c.file == file)
+        .unwrap_or_else(|| panic!("{file}: no row in CASES"))
+}
+
+/// A fresh directory per test, removed on drop.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(test: &str) -> TempDir {
+        let dir =
+            std::env::temp_dir().join(format!("foldfree-bad-{}-{}", std::process::id(), test));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).expect("create the test's temp dir");
+        TempDir(dir)
+    }
+
+    fn join(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    fn entries(&self) -> BTreeSet<String> {
+        fs::read_dir(&self.0)
+            .expect("list the temp dir")
+            .map(|e| {
+                e.expect("read a temp dir entry")
+                    .file_name()
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .collect()
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.0);
+    }
+}
+
+/// What a finished run of the binary produced.
+struct Run {
+    code: Option<i32>,
+    stdout: String,
+    stderr: String,
+}
+
+/// Runs the binary with `args`, killing it after [`TIMEOUT`] (`Err` then). Output is drained
+/// on threads so a chatty child cannot block on a full pipe.
+fn run_foldfree(args: &[&Path]) -> Result<Run, String> {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("cannot start foldfree: {e}"))?;
+    let drain = |mut pipe: Box<dyn Read + Send>| {
+        thread::spawn(move || {
+            let mut buf = Vec::new();
+            let _ = pipe.read_to_end(&mut buf);
+            String::from_utf8_lossy(&buf).into_owned()
+        })
+    };
+    let out = drain(Box::new(child.stdout.take().expect("piped stdout")));
+    let err = drain(Box::new(child.stderr.take().expect("piped stderr")));
+    let start = Instant::now();
+    let status = loop {
+        match child.try_wait() {
+            Ok(Some(status)) => break status,
+            Ok(None) if start.elapsed() > TIMEOUT => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(format!("hang: still running after {TIMEOUT:?}, killed"));
+            }
+            Ok(None) => thread::sleep(Duration::from_millis(5)),
+            Err(e) => return Err(format!("waiting for foldfree failed: {e}")),
+        }
+    };
+    Ok(Run {
+        code: status.code(),
+        stdout: out.join().unwrap_or_default(),
+        stderr: err.join().unwrap_or_default(),
+    })
+}
+
+/// Properties of every run, whatever the file: no panic text, a normal exit (not a signal),
+/// never exit 1 (that is for machine or solver failures, not for input).
+fn universal_problems(run: &Run) -> Vec<String> {
+    let mut problems = Vec::new();
+    for text in [&run.stdout, &run.stderr] {
+        for bad in ["panicked", "RUST_BACKTRACE"] {
+            if text.contains(bad) {
+                problems.push(format!("output contains {bad:?}"));
+            }
+        }
+    }
+    match run.code {
+        None => problems.push("killed by a signal".to_string()),
+        Some(1) => problems.push("exit 1 (machine/solver failure) for an input file".to_string()),
+        Some(_) => {}
+    }
+    problems
+}
+
+/// For an error: stderr is exactly one line `foldfree: error: FILE…` containing `fragment`,
+/// stdout is empty.
+fn error_line_problems(run: &Run, file: &Path, fragment: &str) -> Vec<String> {
+    let mut problems = Vec::new();
+    let lines: Vec<&str> = run.stderr.lines().collect();
+    if lines.len() != 1 || !run.stderr.ends_with('\n') {
+        problems.push(format!(
+            "stderr is not exactly one line ({} lines)",
+            lines.len()
+        ));
+    }
+    let first = lines.first().copied().unwrap_or("");
+    let prefix = format!("foldfree: error: {}", file.display());
+    if !first.starts_with(&prefix) {
+        problems.push(format!("stderr does not begin with {prefix:?}"));
+    }
+    if !first.contains(fragment) {
+        problems.push(format!("stderr does not contain {fragment:?}"));
+    }
+    if !run.stdout.is_empty() {
+        problems.push(format!("stdout is not empty: {:?}", run.stdout));
+    }
+    problems
+}
+
+/// `v` and `vt` records in a written OBJ: one `vt` per `v`, and at least one `f`.
+fn output_problems(out: &Path) -> Vec<String> {
+    let Ok(text) = fs::read_to_string(out) else {
+        return vec![format!("no readable output at {}", out.display())];
+    };
+    let count = |tag: &str| {
+        text.lines()
+            .filter(|l| l.split_ascii_whitespace().next() == Some(tag))
+            .count()
+    };
+    let (v, vt, f) = (count("v"), count("vt"), count("f"));
+    if v == 0 || v != vt || f == 0 {
+        vec![format!("output has {v} v, {vt} vt, {f} f records")]
+    } else {
+        Vec::new()
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Cmd {
+    Param,
+    Stats,
+}
+
+/// `foldfree param INPUT -o OUT --init tutte --solver none` or `foldfree stats INPUT`.
+fn run_cmd(cmd: Cmd, input: &Path, out: &Path) -> Result<Run, String> {
+    match cmd {
+        Cmd::Param => run_foldfree(&[
+            Path::new("param"),
+            input,
+            Path::new("-o"),
+            out,
+            Path::new("--init"),
+            Path::new("tutte"),
+            Path::new("--solver"),
+            Path::new("none"),
+        ]),
+        Cmd::Stats => run_foldfree(&[Path::new("stats"), input]),
+    }
+}
+
+/// Runs `cmd` on `file` (output, for `param`, in `dir`) and lists every violated expectation.
+fn check(cmd: Cmd, file: &str, expect: Expect, dir: &TempDir) -> Vec<String> {
+    let input = bad_dir().join(file);
+    let out = dir.join(&format!("{file}.out.obj"));
+    let run = match run_cmd(cmd, &input, &out) {
+        Ok(run) => run,
+        Err(e) => return vec![e],
+    };
+    let mut problems = universal_problems(&run);
+    let failed = run.code != Some(0);
+    if cmd == Cmd::Param && failed && out.exists() {
+        problems.push("an output file was written although the run failed".to_string());
+    }
+    match expect {
+        Valid => {
+            if failed {
+                problems.push(format!("exit {:?}, expected 0", run.code));
+            } else if cmd == Cmd::Param {
+                problems.extend(output_problems(&out));
+            } else if !run.stdout.contains("valid: yes") {
+                problems.push("stats did not print \"valid: yes\"".to_string());
+            }
+        }
+        Error(code, fragment) => {
+            if run.code != Some(code) {
+                problems.push(format!("exit {:?}, expected {code}", run.code));
+            }
+            problems.extend(error_line_problems(&run, &input, fragment));
+        }
+    }
+    let name = match cmd {
+        Cmd::Param => "param",
+        Cmd::Stats => "stats",
+    };
+    problems
+        .into_iter()
+        .map(|p| {
+            format!(
+                "{file} ({name}): {p}\n    stderr: {}",
+                run.stderr.trim_end()
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn every_corpus_file_gives_its_documented_result_without_panic_or_hang() {
+    let dir = TempDir::new("corpus");
+    let files = corpus_files();
+    assert!(files.len() >= CASES.len(), "corpus files missing");
+    let mut problems = Vec::new();
+    for file in &files {
+        let Some(case) = CASES.iter().find(|c| c.file == file) else {
+            problems.push(format!(
+                "{file}: no row in CASES (add one, and one to the README)"
+            ));
+            continue;
+        };
+        problems.extend(check(Cmd::Param, file, case.param, &dir));
+        problems.extend(check(Cmd::Stats, file, case.stats, &dir));
+    }
+    // Only the outputs of valid runs remain: no temporaries, nothing from failed runs.
+    let expected_outputs: BTreeSet<String> = CASES
+        .iter()
+        .filter(|c| matches!(c.param, Valid))
+        .map(|c| format!("{}.out.obj", c.file))
+        .collect();
+    let leftovers: Vec<String> = dir
+        .entries()
+        .into_iter()
+        .filter(|n| !expected_outputs.contains(n))
+        .collect();
+    if !leftovers.is_empty() {
+        problems.push(format!("unexpected files in the output dir: {leftovers:?}"));
+    }
+    assert!(problems.is_empty(), "\n{}", problems.join("\n"));
+}
+
+#[test]
+fn every_table_row_names_an_existing_file() {
+    let files = corpus_files();
+    let stale: Vec<&str> = CASES
+        .iter()
+        .map(|c| c.file)
+        .filter(|f| !files.contains(*f))
+        .collect();
+    assert!(stale.is_empty(), "rows without a file: {stale:?}");
+    let mut seen = BTreeSet::new();
+    for c in CASES {
+        assert!(seen.insert(c.file), "{}: two rows", c.file);
+    }
+}
+
+#[test]
+fn every_corpus_file_has_a_readme_row() {
+    let readme =
+        fs::read_to_string(bad_dir().join("README.md")).expect("read tests/data/bad/README.md");
+    let missing: Vec<String> = corpus_files()
+        .into_iter()
+        .filter(|f| !readme.contains(&format!("| `{f}` |")))
+        .collect();
+    assert!(missing.is_empty(), "no README row for {missing:?}");
+}
+
+/// `f 1 2 99999999999999999999999`: the index does not fit in i64, so parsing it fails and the
+/// message claims the token "does not start with an integer index". It does; the problem is
+/// the range, and `huge_index.obj` (99999999999) gets "refers to vertex …, but there are only 3
+/// vertices". Regression test: the message names the index as out of range.
+#[test]
+fn index_beyond_i64_is_reported_as_out_of_range() {
+    let dir = TempDir::new("i64");
+    let file = "index_overflows_i64.obj";
+    let input = bad_dir().join(file);
+    for cmd in [Cmd::Param, Cmd::Stats] {
+        let out = dir.join("out.obj");
+        let run = run_cmd(cmd, &input, &out).expect("run foldfree");
+        let mut problems = universal_problems(&run);
+        if run.code != Some(2) {
+            problems.push(format!("exit {:?}, expected 2", run.code));
+        }
+        problems.extend(error_line_problems(&run, &input, "99999999999999999999999"));
+        if out.exists() {
+            problems.push("an output file was written".to_string());
+        }
+        if run.stderr.contains("does not start with an integer") {
+            problems.push("misleading: the token does start with an integer".to_string());
+        }
+        if !(run.stderr.contains("only 3 vertices") || run.stderr.contains("out of range")) {
+            problems.push("the message does not say the index is out of range".to_string());
+        }
+        assert!(
+            problems.is_empty(),
+            "{}\n    stderr: {}",
+            problems.join("\n"),
+            run.stderr.trim_end()
+        );
+    }
+}
+
+/// A file with `\r`-only (classic Mac) line endings is one line to the parser; when it starts
+/// with a comment, everything is commented out and the error says "the mesh has no faces",
+/// which is false (the file has 2). Regression test: `\r` is read as a line break (exit 0), or
+/// the file is refused naming its line endings.
+#[test]
+fn cr_only_line_endings_are_not_reported_as_having_no_faces() {
+    let dir = TempDir::new("cr");
+    let file = "cr_only_line_endings.obj";
+    for cmd in [Cmd::Param, Cmd::Stats] {
+        let accepted = check(cmd, file, Valid, &dir);
+        let named = check(cmd, file, Error(2, "line ending"), &dir);
+        assert!(
+            accepted.is_empty() || named.is_empty(),
+            "neither read nor refused naming the line endings:\n{}",
+            accepted.join("\n")
+        );
+    }
+}

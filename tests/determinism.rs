@@ -1,0 +1,171 @@
+//! Same input and options → byte-identical output OBJ: `foldfree param` on
+//! tests/data/camel_open.obj twice per configuration (CPU MIPS, CPU SD, CPU with different rayon
+//! thread counts, Vulkan), compared byte for byte. The iteration cap is small so each run takes
+//! well under a second on the CPU; the JSON report is not compared (it holds timings).
+//!
+//! Vulkan: skipped when this machine has none, unless `REQUIRE_VULKAN=1` (then it fails).
+
+use std::fs;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::thread;
+use std::time::{Duration, Instant};
+
+/// A run that takes longer is a hang.
+const TIMEOUT: Duration = Duration::from_secs(180);
+
+fn camel() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/camel_open.obj")
+}
+
+/// A fresh directory per test, removed on drop.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(test: &str) -> TempDir {
+        let dir =
+            std::env::temp_dir().join(format!("foldfree-det-{}-{}", std::process::id(), test));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).expect("create the test's temp dir");
+        TempDir(dir)
+    }
+
+    fn join(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.0);
+    }
+}
+
+/// `foldfree param camel_open.obj -o OUT --max-iters 300 -q EXTRA…` with `env` set; panics
+/// unless it exits 0 within [`TIMEOUT`]. Returns the bytes written to OUT.
+fn param(out: &Path, extra: &[&str], env: &[(&str, &str)]) -> Vec<u8> {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_foldfree"));
+    cmd.arg("param")
+        .arg(camel())
+        .arg("-o")
+        .arg(out)
+        .args(["--max-iters", "300", "-q"])
+        .args(extra)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let mut child = cmd.spawn().expect("start foldfree");
+    let mut pipe = child.stderr.take().expect("piped stderr");
+    let drain = thread::spawn(move || {
+        let mut s = String::new();
+        let _ = pipe.read_to_string(&mut s);
+        s
+    });
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait for foldfree") {
+            break status;
+        }
+        if start.elapsed() > TIMEOUT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("foldfree param {extra:?} still running after {TIMEOUT:?}; killed");
+        }
+        thread::sleep(Duration::from_millis(10));
+    };
+    let stderr = drain.join().unwrap_or_default();
+    assert!(
+        status.success(),
+        "foldfree param {extra:?} failed ({status}):\n{stderr}"
+    );
+    fs::read(out).unwrap_or_else(|e| panic!("read {}: {e}", out.display()))
+}
+
+/// Asserts `a == b`, naming the first differing line (1-based) of the two OBJ texts.
+fn assert_same_bytes(a: &[u8], b: &[u8], what: &str) {
+    if a == b {
+        return;
+    }
+    let (ta, tb) = (String::from_utf8_lossy(a), String::from_utf8_lossy(b));
+    let differing = ta
+        .lines()
+        .zip(tb.lines())
+        .enumerate()
+        .filter(|(_, (x, y))| x != y)
+        .map(|(i, _)| i + 1)
+        .collect::<Vec<_>>();
+    let first = differing.first().copied();
+    let line = |t: &str, n: Option<usize>| {
+        n.and_then(|n| t.lines().nth(n - 1))
+            .unwrap_or("")
+            .to_string()
+    };
+    panic!(
+        "{what}: outputs differ ({} vs {} bytes, {} differing lines); first at line {first:?}:\n  \
+         run 1: {}\n  run 2: {}",
+        a.len(),
+        b.len(),
+        differing.len(),
+        line(&ta, first),
+        line(&tb, first)
+    );
+}
+
+/// Runs the same configuration twice and compares the outputs.
+fn assert_reproducible(test: &str, extra: &[&str]) {
+    let dir = TempDir::new(test);
+    let a = param(&dir.join("a.obj"), extra, &[]);
+    let b = param(&dir.join("b.obj"), extra, &[]);
+    assert_same_bytes(&a, &b, &format!("param {extra:?}"));
+}
+
+#[test]
+fn cpu_mips_output_is_byte_identical_across_runs() {
+    assert_reproducible("cpu-mips", &["--backend", "cpu", "--energy", "mips"]);
+}
+
+#[test]
+fn cpu_sd_output_is_byte_identical_across_runs() {
+    assert_reproducible("cpu-sd", &["--backend", "cpu", "--energy", "sd"]);
+}
+
+/// Stronger than run-to-run: the CPU result does not depend on how many rayon threads share
+/// the work (reductions are summed in fixed chunks, in order).
+#[test]
+fn cpu_output_does_not_depend_on_the_thread_count() {
+    let dir = TempDir::new("threads");
+    let extra = ["--backend", "cpu"];
+    let one = param(&dir.join("t1.obj"), &extra, &[("RAYON_NUM_THREADS", "1")]);
+    for threads in ["2", "3"] {
+        let out = dir.join(&format!("t{threads}.obj"));
+        let many = param(&out, &extra, &[("RAYON_NUM_THREADS", threads)]);
+        assert_same_bytes(&one, &many, &format!("RAYON_NUM_THREADS 1 vs {threads}"));
+    }
+}
+
+/// True when a Vulkan device can be opened; false (after saying so) when this machine has
+/// none. Panics under `REQUIRE_VULKAN=1`, and on any error other than "unavailable".
+fn vulkan_available() -> bool {
+    let require = std::env::var("REQUIRE_VULKAN").is_ok_and(|v| v == "1");
+    match foldfree::gpu::Context::new(&Default::default()) {
+        Ok(_) => true,
+        Err(e) if require => panic!("REQUIRE_VULKAN=1 but Vulkan is unavailable: {e}"),
+        Err(e) if e.is_unavailable() => {
+            eprintln!("skipped: no Vulkan ({e})");
+            false
+        }
+        Err(e) => panic!("creating the Vulkan context failed: {e}"),
+    }
+}
+
+#[test]
+fn vulkan_output_is_byte_identical_across_runs() {
+    if !vulkan_available() {
+        return;
+    }
+    assert_reproducible("vulkan-mips", &["--backend", "vulkan"]);
+}
