@@ -478,6 +478,10 @@ fn every_corpus_file_has_a_readme_row() {
 fn index_beyond_i64_is_reported_as_out_of_range() {
     let dir = TempDir::new("i64");
     let file = "index_overflows_i64.obj";
+    assert!(
+        matches!(case(file).param, Error(2, _)),
+        "table and regression test disagree"
+    );
     let input = bad_dir().join(file);
     for cmd in [Cmd::Param, Cmd::Stats] {
         let out = dir.join("out.obj");
@@ -513,6 +517,10 @@ fn index_beyond_i64_is_reported_as_out_of_range() {
 fn cr_only_line_endings_are_not_reported_as_having_no_faces() {
     let dir = TempDir::new("cr");
     let file = "cr_only_line_endings.obj";
+    assert!(
+        matches!(case(file).param, Valid),
+        "table and regression test disagree"
+    );
     for cmd in [Cmd::Param, Cmd::Stats] {
         let accepted = check(cmd, file, Valid, &dir);
         let named = check(cmd, file, Error(2, "line ending"), &dir);

@@ -96,7 +96,7 @@ pub fn parse_obj_with_info(
     let text: std::borrow::Cow<'_, str> = if text.contains('\r') {
         std::borrow::Cow::Owned(text.replace("\r\n", "\n").replace('\r', "\n"))
     } else {
-        std::borrow::Cow::Borrowed(&text[..])
+        std::borrow::Cow::Borrowed(text)
     };
     for (i, line) in text.lines().enumerate() {
         let line_no = i + 1;
