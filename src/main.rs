@@ -34,7 +34,7 @@ enum Command {
         json: bool,
     },
     /// UV-parameterize a disk-topology mesh without flipped triangles.
-    Param(ParamArgs),
+    Param(Box<ParamArgs>),
     /// List the Vulkan devices and which one would be used.
     Devices,
     /// Time `param` over meshes, energies and backends; prints a Markdown table.
@@ -152,6 +152,23 @@ struct ParamArgs {
     /// No progress display.
     #[arg(short, long)]
     quiet: bool,
+    /// Write the UV layout as SVG: faces coloured by conformal distortion σ1/σ2 (blue at 1,
+    /// orange at 2 and above), flipped faces red, with a legend.
+    #[arg(long, value_name = "PATH")]
+    svg: Option<PathBuf>,
+    /// Write the UV layout as PNG (same colours as --svg, no legend).
+    #[arg(long, value_name = "PATH")]
+    png: Option<PathBuf>,
+    /// Side of the --png picture in pixels.
+    #[arg(long, value_name = "N", default_value_t = 1024,
+          value_parser = clap::value_parser!(u32).range(16..=8192))]
+    png_size: u32,
+    /// Write the convergence plot (residuals and energy against iteration) as SVG.
+    #[arg(long, value_name = "PATH")]
+    plot: Option<PathBuf>,
+    /// Write the convergence plot as PNG.
+    #[arg(long, value_name = "PATH")]
+    plot_png: Option<PathBuf>,
 }
 
 fn run_stats(input: PathBuf, json: bool) -> foldfree::Result<()> {
@@ -352,6 +369,15 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     if let Some(path) = &args.report {
         pipeline::write_report(path, r)?;
     }
+    let images = foldfree::viz::ImageOutputs {
+        layout_svg: args.svg.clone(),
+        layout_png: args.png.clone(),
+        png_size: args.png_size,
+        plot_svg: args.plot.clone(),
+        plot_png: args.plot_png.clone(),
+        ..Default::default()
+    };
+    foldfree::viz::write_images(&out.mesh, &out.uv, &r.history, &images)?;
     eprintln!(
         "foldfree: {} → {}: {} faces, backend {} ({}), init {}, solver {}{}",
         r.input,
@@ -398,7 +424,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Stats { input, json } => run_stats(input, json),
-        Command::Param(args) => run_param(args),
+        Command::Param(args) => run_param(*args),
         Command::Devices => run_devices(),
         Command::Bench {
             meshes,

@@ -8,12 +8,12 @@
 //!
 //! # Colour scale
 //!
-//! A face's colour encodes δ = σ1/σ2 (see [`crate::metrics`]): δ = 1 (conformal) is blue,
-//! δ ≈ 1.4 light blue, δ ≈ 1.6 pale yellow, rising to a saturated orange at δ ≥ `delta_max`
-//! (default 2), linear in δ. The scale is quantised into [`DELTA_BINS`] bins so that the SVG
-//! can hold one `<path>` per bin and the PNG shows exactly the same colours. Flipped faces
-//! (signed UV area ≤ 0) are pure red, [`FLIP_COLOR`], a colour the scale never produces, so
-//! a single red pixel means a fold.
+//! A face's colour encodes δ = σ1/σ2 (see [`crate::metrics`]), linearly in δ: δ = 1
+//! (conformal) is blue, then light blue (δ = 1.35), pale yellow (1.6), orange (1.8), up to a
+//! saturated dark orange at δ ≥ `delta_max` (default 2; the stops scale with it). The scale
+//! is quantised into [`DELTA_BINS`] bins so that the SVG can hold one `<path>` per bin and the
+//! PNG shows exactly the same colours. Flipped faces (signed UV area ≤ 0) are pure red,
+//! [`FLIP_COLOR`], a colour the scale never produces, so a single red pixel means a fold.
 #![forbid(unsafe_code)]
 
 pub mod plot;
@@ -82,8 +82,8 @@ impl Default for LayoutStyle {
     }
 }
 
-/// Colour of distortion δ on the continuous scale: [`STOPS`] at t = (δ − 1)/(δmax − 1),
-/// clamped to [0, 1]; NaN or +∞ (a degenerate face) give the saturated end.
+/// Colour of distortion δ on the continuous scale (module docs): linear between colour stops
+/// at t = (δ − 1)/(δmax − 1), clamped to [0, 1]; NaN or +∞ (a degenerate face) give the saturated end.
 pub fn delta_color(delta: f64, delta_max: f64) -> [u8; 3] {
     color_at(delta_t(delta, delta_max))
 }
@@ -137,10 +137,10 @@ pub(crate) fn edge_color(c: [u8; 3]) -> [u8; 3] {
 /// Bin of one face: [`FLIPPED_BIN`] when its signed UV area is ≤ 0 (or NaN), else the bin of
 /// its δ (+∞ for a zero-area 3D triangle, which lands in the saturated bin).
 pub fn face_bin(d: &FaceDistortion, delta_max: f64) -> u8 {
-    if !(d.uv_area > 0.0) {
-        FLIPPED_BIN
-    } else {
+    if d.uv_area > 0.0 {
         delta_bin(d.delta_con(), delta_max)
+    } else {
+        FLIPPED_BIN
     }
 }
 
@@ -163,11 +163,7 @@ pub(crate) struct LayoutStats {
 }
 
 /// Bins and legend numbers of a map in one pass over [`crate::metrics::face_distortions`].
-pub(crate) fn classify(
-    mesh: &TriMesh,
-    uv: &[[f64; 2]],
-    delta_max: f64,
-) -> (Vec<u8>, LayoutStats) {
+pub(crate) fn classify(mesh: &TriMesh, uv: &[[f64; 2]], delta_max: f64) -> (Vec<u8>, LayoutStats) {
     let d = crate::metrics::face_distortions(&mesh.positions, &mesh.faces, uv);
     let bins: Vec<u8> = d.iter().map(|f| face_bin(f, delta_max)).collect();
     let flips = bins.iter().filter(|&&b| b == FLIPPED_BIN).count();
@@ -265,8 +261,8 @@ pub(crate) fn want_edges(
                 .filter_map(|f| {
                     let [a, b, c] = f.map(|v| uv.get(v as usize).copied());
                     let (a, b, c) = (a?, b?, c?);
-                    let x = 0.5
-                        * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])).abs();
+                    let x =
+                        0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])).abs();
                     x.is_finite().then_some(x)
                 })
                 .sum();
@@ -335,7 +331,7 @@ pub fn write_images(
         }
         if let Some(path) = &outs.layout_png {
             let bytes = raster::render_layout(mesh, uv, &bins, outs.png_size, &outs.style)
-                .and_then(|c| c.encode_png())
+                .encode_png()
                 .map_err(|e| io_error(path, e))?;
             write_file(path, &bytes)?;
         }
@@ -359,10 +355,10 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     })
 }
 
-fn io_error(path: &Path, e: png::EncodingError) -> Error {
+fn io_error(path: &Path, source: std::io::Error) -> Error {
     Error::Io {
         path: path.to_path_buf(),
-        source: std::io::Error::other(e),
+        source,
     }
 }
 
