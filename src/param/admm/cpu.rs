@@ -143,7 +143,12 @@ pub fn residuals(
         .a
         .par_chunks(SUM_CHUNK)
         .zip(problem.weight.par_chunks(SUM_CHUNK))
-        .map(|(a, w)| a.iter().zip(w).map(|(a, w)| w * energy::value(energy, a)).sum::<f64>())
+        .map(|(a, w)| {
+            a.iter()
+                .zip(w)
+                .map(|(a, w)| w * energy::value(energy, a))
+                .sum::<f64>()
+        })
         .collect::<Vec<_>>()
         .iter()
         .sum();
