@@ -8,7 +8,7 @@
 
 use sprs::{CsMat, TriMat};
 
-use crate::linalg::cg::{pcg, CgOptions, Preconditioner};
+use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
 use crate::linalg::SolveError;
 use crate::param::admm::AdmmProblem;
 
@@ -20,7 +20,8 @@ pub struct LeastSquaresRecovery {
     index: Vec<u32>,
     /// The pinned vertex (fixes the translation).
     pinned: u32,
-    laplacian: CsMat<f64>,
+    /// The cotangent Laplacian with its preconditioner, built once.
+    solver: KrylovSolver,
     /// #F×3 gradients of the corner hat functions in the face's frame.
     grads: Vec<[[f64; 2]; 3]>,
     /// #F face areas.
@@ -34,7 +35,7 @@ impl LeastSquaresRecovery {
         problem: &AdmmProblem,
         faces: &[[u32; 3]],
         n_vertices: usize,
-    ) -> LeastSquaresRecovery {
+    ) -> Result<LeastSquaresRecovery, SolveError> {
         let mut used = vec![false; n_vertices];
         for f in faces {
             for &v in f {
@@ -79,15 +80,22 @@ impl LeastSquaresRecovery {
             }
             grads.push(g);
         }
-        LeastSquaresRecovery {
+        let laplacian: CsMat<f64> = tri.to_csr();
+        // Multigrid-preconditioned CG, set up once: every recovery is two warm-started solves.
+        let opts = CgOptions {
+            tolerance: 1e-10,
+            max_iterations: 20 * free.len().max(100),
+            preconditioner: Preconditioner::Amg { block_size: 1 },
+        };
+        Ok(LeastSquaresRecovery {
             free,
             index,
             pinned,
-            laplacian: tri.to_csr(),
+            solver: KrylovSolver::cg(&laplacian, &opts)?,
             grads,
             areas: problem.area.clone(),
             faces: faces.to_vec(),
-        }
+        })
     }
 
     /// Recovers UVs from the Jacobians `a` (#F, row-major 2x2). `uv` (#V) is the warm start and
@@ -118,12 +126,7 @@ impl LeastSquaresRecovery {
                 }
             }
             let mut x: Vec<f64> = self.free.iter().map(|&v| uv[v as usize][r]).collect();
-            let opts = CgOptions {
-                tolerance: 1e-10,
-                max_iterations: 20 * n.max(100),
-                preconditioner: Preconditioner::Ic0,
-            };
-            pcg(&self.laplacian, &b, &mut x, &opts)?;
+            self.solver.solve(&b, &mut x)?;
             for (k, &v) in self.free.iter().enumerate() {
                 uv[v as usize][r] = x[k];
             }

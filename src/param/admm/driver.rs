@@ -185,7 +185,7 @@ pub fn solve(
 ) -> crate::Result<AdmmResult> {
     let nf = problem.n_faces().max(1) as f64;
     let mut mu_rel = opts.initial_mu_rel();
-    let recovery = LeastSquaresRecovery::new(problem, faces, init_uv.len());
+    let recovery = LeastSquaresRecovery::new(problem, faces, init_uv.len())?;
 
     let state = AdmmState::from_uv(problem, faces, init_uv);
     exec.upload(&state)?;
@@ -327,10 +327,10 @@ pub fn solve(
             break;
         }
     }
-    if !converged && !interrupted && it < opts.max_iters {
-        // Unreachable by construction (the loop only exits early when converged or stopped).
-        debug_assert!(false);
-    }
+    debug_assert!(
+        converged || interrupted || it >= opts.max_iters,
+        "the loop only exits early when converged or stopped"
+    );
     if interrupted {
         let st = exec.download()?;
         recovery.recover(&st.a, &mut uv)?;
