@@ -6,6 +6,7 @@
 //! Only [`gpu`] contains `unsafe` code; every other module forbids it.
 
 pub mod bench;
+pub mod embed;
 pub mod error;
 pub mod gpu;
 pub mod init;

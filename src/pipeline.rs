@@ -141,6 +141,128 @@ fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
     }
 }
 
+/// What [`compute_map`] produced.
+pub struct MapOutput {
+    /// #V flip-free, finite UVs.
+    pub uv: Vec<[f64; 2]>,
+    /// Flipped faces of the start map.
+    pub init_flips: usize,
+    /// The ADMM run, when the solver ran.
+    pub admm: Option<admm::AdmmResult>,
+    /// Per-kernel device times (Vulkan with `profile`).
+    pub kernel_times: Option<admm::vulkan::KernelTimes>,
+    /// Bytes the kernels move per iteration (Vulkan).
+    pub bytes_per_iteration: Option<u64>,
+    pub seconds_init: f64,
+    pub seconds_solve: f64,
+}
+
+/// The map of a validated disk mesh, shared by the CLI job and embedding hosts: start map, a
+/// Tutte safety net when the start map folds, ADMM on `ctx` (Vulkan) or on the CPU, and the
+/// checks that keep a flipped or non-finite map from ever being returned. With a context, any
+/// validation message it collected fails the run.
+pub fn compute_map(
+    mesh: &TriMesh,
+    topo: &Topology,
+    init: InitMethod,
+    solver: SolverChoice,
+    opts: &AdmmOptions,
+    ctx: Option<&crate::gpu::Context>,
+    profile: bool,
+    progress: &mut dyn FnMut(&History),
+) -> Result<MapOutput> {
+    let t1 = Instant::now();
+    let frames = mesh::frames::compute(mesh);
+    let area_3d: f64 = frames.area.iter().sum();
+    let mut uv = initial_map(mesh, topo, init)?;
+    normalize_area(mesh, &mut uv, area_3d);
+    let init_flips = crate::init::count_flips(&mesh.faces, &uv);
+    let seconds_init = t1.elapsed().as_secs_f64();
+
+    let t2 = Instant::now();
+    let mut out = MapOutput {
+        uv: Vec::new(),
+        init_flips,
+        admm: None,
+        kernel_times: None,
+        bytes_per_iteration: None,
+        seconds_init,
+        seconds_solve: 0.0,
+    };
+    if solver == SolverChoice::Admm {
+        let problem = AdmmProblem::new(mesh, topo, &frames);
+        // A start map with flips (LSCM can fold) gets a flip-free safety net: never output a
+        // flipped map because the solver could not unfold one.
+        let fallback = if init_flips > 0 {
+            let mut t = initial_map(mesh, topo, InitMethod::Tutte(TutteWeights::Uniform))?;
+            normalize_area(mesh, &mut t, area_3d);
+            Some(t)
+        } else {
+            None
+        };
+        let mut solve = |exec: &mut dyn admm::driver::Executor| {
+            admm::solve(
+                &problem,
+                &mesh.faces,
+                &uv,
+                fallback.as_deref(),
+                opts,
+                exec,
+                progress,
+            )
+        };
+        let result = match ctx {
+            Some(ctx) => {
+                let mut exec = admm::vulkan::VulkanExecutor::new(
+                    ctx,
+                    &problem,
+                    opts.energy,
+                    opts.newton_iters,
+                    profile,
+                )?;
+                let r = solve(&mut exec)?;
+                out.kernel_times = exec.kernel_times().cloned();
+                out.bytes_per_iteration = Some(exec.bytes_per_iteration());
+                let messages = ctx.take_validation_messages();
+                if !messages.is_empty() {
+                    return Err(crate::gpu::GpuError::Invalid(format!(
+                        "{} Vulkan validation messages, first: {}",
+                        messages.len(),
+                        messages[0]
+                    ))
+                    .into());
+                }
+                r
+            }
+            None => {
+                let mut exec =
+                    admm::cpu::CpuExecutor::new(&problem, opts.energy, opts.newton_iters);
+                solve(&mut exec)?
+            }
+        };
+        uv.clone_from(&result.uv);
+        out.admm = Some(result);
+    }
+    out.seconds_solve = t2.elapsed().as_secs_f64();
+    let flips = crate::init::count_flips(&mesh.faces, &uv);
+    if flips > 0 {
+        return Err(crate::linalg::SolveError::Failed {
+            what: format!(
+                "the map has {flips} flipped faces (start map: {init_flips} flips); nothing was written"
+            ),
+        }
+        .into());
+    }
+    if uv.iter().any(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        return Err(crate::linalg::SolveError::NonFinite {
+            what: "UV coordinates".into(),
+        }
+        .into());
+    }
+    out.uv = uv;
+    Ok(out)
+}
+
 /// `foldfree param`: load and validate, start map, solve, recover, measure, write the OBJ
 /// (atomically; never over the input). `progress` sees every residual check.
 pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<ParamOutput> {
@@ -155,80 +277,43 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     topo.require_disk(&job.input)?;
     let t_load = t0.elapsed().as_secs_f64();
 
-    let t1 = Instant::now();
-    let frames = mesh::frames::compute(&mesh);
-    let area_3d: f64 = frames.area.iter().sum();
-    let mut uv = initial_map(&mesh, &topo, job.init)?;
-    normalize_area(&mesh, &mut uv, area_3d);
-    let init_flips = crate::init::count_flips(&mesh.faces, &uv);
-    let t_init = t1.elapsed().as_secs_f64();
+    let ctx = if job.solver == SolverChoice::Admm {
+        choose_backend(job)?
+    } else {
+        None
+    };
+    let map = compute_map(
+        &mesh,
+        &topo,
+        job.init,
+        job.solver,
+        &job.admm,
+        ctx.as_ref(),
+        job.profile,
+        progress,
+    )?;
+    let uv = map.uv;
+    let m = metrics::evaluate(&mesh.positions, &mesh.faces, &uv, &topo.boundary_loops);
+    mesh::obj::write_obj_with_uv(&job.output, &mesh, &uv).map_err(|source| Error::Io {
+        path: job.output.clone(),
+        source,
+    })?;
 
-    let t2 = Instant::now();
     let mut report = ParamReport {
         init: match job.init {
             InitMethod::Tutte(TutteWeights::Uniform) => "tutte".into(),
             InitMethod::Tutte(TutteWeights::MeanValue) => "tutte_mean_value".into(),
             InitMethod::Lscm => "lscm".into(),
         },
-        init_flips,
+        init_flips: map.init_flips,
         backend: "cpu".into(),
         device: "host CPU".into(),
         solver: "none".into(),
+        kernel_times: map.kernel_times,
+        bytes_per_iteration: map.bytes_per_iteration,
         ..ParamReport::default()
     };
-    if job.solver == SolverChoice::Admm {
-        let problem = AdmmProblem::new(&mesh, &topo, &frames);
-        // A start map with flips (LSCM can fold) gets a flip-free safety net: never output a
-        // flipped map because the solver could not unfold one.
-        let fallback = if init_flips > 0 {
-            let mut t = initial_map(&mesh, &topo, InitMethod::Tutte(TutteWeights::Uniform))?;
-            normalize_area(&mesh, &mut t, area_3d);
-            Some(t)
-        } else {
-            None
-        };
-        let ctx = choose_backend(job)?;
-        let mut solve = |exec: &mut dyn admm::driver::Executor| {
-            admm::solve(
-                &problem,
-                &mesh.faces,
-                &uv,
-                fallback.as_deref(),
-                &job.admm,
-                exec,
-                progress,
-            )
-        };
-        let result = match &ctx {
-            Some(ctx) => {
-                let mut exec = admm::vulkan::VulkanExecutor::new(
-                    ctx,
-                    &problem,
-                    job.admm.energy,
-                    job.admm.newton_iters,
-                    job.profile,
-                )?;
-                let r = solve(&mut exec)?;
-                report.kernel_times = exec.kernel_times().cloned();
-                report.bytes_per_iteration = Some(exec.bytes_per_iteration());
-                let messages = ctx.take_validation_messages();
-                if !messages.is_empty() {
-                    return Err(crate::gpu::GpuError::Invalid(format!(
-                        "{} Vulkan validation messages, first: {}",
-                        messages.len(),
-                        messages[0]
-                    ))
-                    .into());
-                }
-                r
-            }
-            None => {
-                let mut exec =
-                    admm::cpu::CpuExecutor::new(&problem, job.admm.energy, job.admm.newton_iters);
-                solve(&mut exec)?
-            }
-        };
-        uv = result.uv;
+    if let Some(result) = map.admm {
         report.backend = result.backend.into();
         report.device = result.device;
         report.solver = "admm".into();
@@ -244,29 +329,6 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
         report.mu_rel = Some(result.mu_rel_final);
         report.history = result.history;
     }
-    let t_solve = t2.elapsed().as_secs_f64();
-
-    let m = metrics::evaluate(&mesh.positions, &mesh.faces, &uv, &topo.boundary_loops);
-    if m.flips > 0 {
-        return Err(crate::linalg::SolveError::Failed {
-            what: format!(
-                "the map has {} flipped faces (start map: {} flips); nothing was written",
-                m.flips, init_flips
-            ),
-        }
-        .into());
-    }
-    if uv.iter().any(|p| !(p[0].is_finite() && p[1].is_finite())) {
-        return Err(crate::linalg::SolveError::NonFinite {
-            what: "UV coordinates".into(),
-        }
-        .into());
-    }
-    mesh::obj::write_obj_with_uv(&job.output, &mesh, &uv).map_err(|source| Error::Io {
-        path: job.output.clone(),
-        source,
-    })?;
-
     report.input = job.input.display().to_string();
     report.output = job.output.display().to_string();
     report.vertices = mesh.positions.len();
@@ -282,8 +344,8 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     report.sd_energy = m.sd_energy;
     report.boundary_self_intersections = m.boundary_self_intersections;
     report.seconds_load = t_load;
-    report.seconds_init = t_init;
-    report.seconds_solve = t_solve;
+    report.seconds_init = map.seconds_init;
+    report.seconds_solve = map.seconds_solve;
     report.seconds = t0.elapsed().as_secs_f64();
     Ok(ParamOutput { mesh, uv, report })
 }

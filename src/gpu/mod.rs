@@ -24,6 +24,7 @@ mod context;
 mod conv;
 mod debug;
 mod error;
+pub mod interop;
 mod pipeline;
 mod query;
 pub mod shaders;

@@ -1,0 +1,187 @@
+//! Embedding in a host's Vulkan renderer (`foldfree::embed`), under the Khronos validation layer
+//! (plus synchronization validation with `FOLDFREE_SYNC_VALIDATION=1`): the host is
+//! `examples/host_renderer.rs`, included as a module, with its own instance, device, queue,
+//! buffers and debug messenger. Any validation message fails. Skips without Vulkan unless
+//! `REQUIRE_VULKAN=1`.
+
+#[path = "../examples/host_renderer.rs"]
+#[allow(dead_code)]
+mod host_renderer;
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use foldfree::embed::{EmbedOptions, Engine, ForeignBuffer, UvFormat, UvTarget, MEMORY_FILE};
+use foldfree::gpu::{vk, Context};
+use host_renderer::{Host, Unavailable};
+
+fn require_vulkan() -> bool {
+    std::env::var("REQUIRE_VULKAN").is_ok_and(|v| v == "1")
+}
+
+/// The host with validation on, or `None` (skip) when this machine has no usable Vulkan.
+fn validated_host() -> Option<Host> {
+    let sync = std::env::var(foldfree::gpu::SYNC_VALIDATION_ENV).is_ok_and(|v| v == "1");
+    match Host::new(true, sync) {
+        Ok(h) => Some(h),
+        Err(e) if require_vulkan() => panic!("REQUIRE_VULKAN=1 but Vulkan is unavailable: {e}"),
+        Err(e) if e.downcast_ref::<Unavailable>().is_some() => {
+            eprintln!("skipped: {e}");
+            None
+        }
+        Err(e) => panic!("creating the host failed: {e}"),
+    }
+}
+
+fn assert_silent(host: &Host, when: &str) {
+    let messages = host.take_messages();
+    assert!(
+        messages.is_empty(),
+        "{} validation message(s) {when}:\n{}",
+        messages.len(),
+        messages.join("\n")
+    );
+}
+
+/// The `vt` lines of an OBJ.
+fn parse_vt(text: &str) -> Vec<[f64; 2]> {
+    text.lines()
+        .filter_map(|l| l.strip_prefix("vt "))
+        .map(|rest| {
+            let v: Vec<f64> = rest
+                .split_whitespace()
+                .map(|x| x.parse().expect("a vt coordinate"))
+                .collect();
+            [v[0], v[1]]
+        })
+        .collect()
+}
+
+/// The CLI's UVs for `mesh` with the Vulkan backend and default options.
+fn cli_uv(mesh: &std::path::Path) -> Vec<[f64; 2]> {
+    let dir = std::env::temp_dir().join(format!("foldfree-embed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let out = dir.join("camel.out.obj");
+    let run = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("param")
+        .arg(mesh)
+        .arg("-o")
+        .arg(&out)
+        .args(["--backend", "vulkan"])
+        .output()
+        .expect("run foldfree");
+    assert!(
+        run.status.success(),
+        "foldfree param failed: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let text = std::fs::read_to_string(&out).expect("read the CLI's output");
+    let _ = std::fs::remove_dir_all(&dir);
+    parse_vt(&text)
+}
+
+/// Both ways of writing UVs put exactly the engine's UVs (rounded to f32) into the host's
+/// interleaved vertex buffer, leave the positions alone, agree with the CLI, raise no
+/// validation message, and leave the host's device working after the engine is dropped.
+#[test]
+fn host_buffer_receives_the_engines_uvs_which_match_the_cli() {
+    let Some(host) = validated_host() else {
+        return;
+    };
+    let mesh_path: PathBuf = host_renderer::default_mesh();
+    let mesh = foldfree::mesh::read_obj(&mesh_path).expect("read the camel");
+    let out = host_renderer::run(&host, &mesh).expect("the host flow");
+    assert_silent(&host, "during the host flow");
+
+    let n = mesh.positions.len();
+    assert_eq!(out.uv.len(), n);
+    assert!(out.uv.iter().all(|p| p[0].is_finite() && p[1].is_finite()));
+    let as_f32: Vec<[f32; 2]> = out.uv.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
+    assert_eq!(
+        out.uv_submitted, as_f32,
+        "UVs written by the engine's submission"
+    );
+    assert_eq!(
+        out.uv_recorded, as_f32,
+        "UVs recorded into the host's command buffer"
+    );
+    assert!(
+        out.positions_intact,
+        "the engine wrote outside the UV slots"
+    );
+
+    let cli = cli_uv(&mesh_path);
+    assert_eq!(cli.len(), n, "one vt per vertex");
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &cli {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let size = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    let worst = out
+        .uv
+        .iter()
+        .zip(&cli)
+        .map(|(a, b)| (a[0] - b[0]).abs().max((a[1] - b[1]).abs()))
+        .fold(0.0f64, f64::max);
+    assert!(
+        worst <= 1e-5 * size,
+        "engine vs CLI: max |diff| {worst:e} over a UV box of {size}"
+    );
+    drop(host);
+}
+
+/// A misaligned or too-small target is refused before any GPU work: the host's bytes stay as
+/// they were and validation stays silent. A bad in-memory mesh is refused like a bad file.
+#[test]
+fn bad_targets_are_refused_without_touching_the_host_buffer() {
+    let Some(host) = validated_host() else {
+        return;
+    };
+    let buffer = host
+        .create_buffer(64, vk::BufferUsageFlags::STORAGE_BUFFER)
+        .expect("host buffer");
+    host.write_buffer(&buffer, &[0xABu8; 64]);
+    {
+        // SAFETY: the handles come from `host`, which outlives the engine (dropped in this
+        // block); the device has `required_features()`; this thread does not use the queue
+        // while the engine runs.
+        let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("from_host");
+        let engine = Engine::new(ctx).expect("engine");
+        let uv = vec![[0.25, 0.5]; 4];
+        let target = |offset, stride| UvTarget {
+            // SAFETY: a live 64-byte storage buffer of the lent device, destroyed after the
+            // engine is dropped.
+            buffer: unsafe { ForeignBuffer::new(buffer.raw, buffer.size) },
+            offset,
+            stride,
+            format: UvFormat::F32x2,
+        };
+        for (offset, stride) in [(2, 8), (0, 6), (0, 4), (40, 8)] {
+            let e = engine
+                .write_uvs(&uv, &target(offset, stride))
+                .expect_err("refused");
+            assert!(matches!(e, foldfree::Error::Usage(_)), "{e}");
+        }
+        assert_eq!(host.read_buffer::<u8>(&buffer), vec![0xAB; 64]);
+        // In-memory meshes go through the CLI's validation; errors name "<memory>".
+        let e = engine
+            .parameterize(
+                &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                &[[0, 1, 3]],
+                &EmbedOptions::default(),
+            )
+            .expect_err("face index out of range");
+        assert!(matches!(e, foldfree::Error::Mesh(_)), "{e}");
+        assert!(e.to_string().contains(MEMORY_FILE), "{e}");
+        // The last layout that fits: 4 UVs ending at byte 64.
+        engine.write_uvs(&uv, &target(32, 8)).expect("fits");
+        let words = host.read_buffer::<f32>(&buffer);
+        assert_eq!(&words[8..], &[0.25, 0.5, 0.25, 0.5, 0.25, 0.5, 0.25, 0.5]);
+        assert_eq!(host.read_buffer::<u8>(&buffer)[..32], [0xAB; 32]);
+    }
+    host.destroy_buffer(buffer);
+    assert_silent(&host, "while refusing bad targets");
+}
