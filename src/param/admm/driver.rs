@@ -84,7 +84,7 @@ impl AdmmOptions {
         AdmmOptions {
             energy,
             mu_rel: None,
-            max_iters: 3000,
+            max_iters: 10_000,
             check_every: 25,
             newton_iters: 1,
             tol_primal: 1e-4,
