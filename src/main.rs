@@ -37,6 +37,9 @@ enum Command {
     Param(Box<ParamArgs>),
     /// List the Vulkan devices and which one would be used.
     Devices,
+    /// Render a UV-mapped OBJ (with `vt`) textured with a checkerboard through its UVs, to PNG
+    /// (offscreen Vulkan graphics).
+    Render(RenderArgs),
     /// Time `param` over meshes, energies and backends; prints a Markdown table.
     Bench {
         /// Input OBJ files (disk topology).
@@ -169,6 +172,92 @@ struct ParamArgs {
     /// Write the convergence plot as PNG.
     #[arg(long, value_name = "PATH")]
     plot_png: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// Input OBJ with texture coordinates (`vt`), e.g. the output of `foldfree param`.
+    input: PathBuf,
+    /// Output PNG.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Checker squares across the UV layout (along the longer side of its bounding box).
+    #[arg(long, value_name = "N", default_value_t = 16,
+          value_parser = clap::value_parser!(u32).range(1..=4096))]
+    checker: u32,
+    /// Side of the square picture in pixels.
+    #[arg(long, value_name = "W", default_value_t = 1024,
+          value_parser = clap::value_parser!(u32).range(16..=8192))]
+    size: u32,
+    /// Direction from the mesh towards the camera, `x,y,z`.
+    #[arg(long, value_name = "X,Y,Z", value_delimiter = ',', allow_hyphen_values = true,
+          default_values_t = [0.0, 0.0, 1.0])]
+    view: Vec<f32>,
+    /// Vulkan device: a substring of its name or its index (see `foldfree devices`).
+    #[arg(long)]
+    device: Option<String>,
+    /// Enable the Khronos validation layer (any message fails the run).
+    #[arg(long)]
+    validation: bool,
+}
+
+fn run_render(args: RenderArgs) -> foldfree::Result<()> {
+    use foldfree::gpu::{render_checker, Context, ContextDesc, RenderDesc};
+    use foldfree::viz::render::{encode_rgba_png, read_obj_with_uv};
+    if args.output == args.input {
+        return Err(foldfree::Error::Usage(
+            "refusing to overwrite the input with the picture".into(),
+        ));
+    }
+    let obj = read_obj_with_uv(&args.input)?;
+    let (positions, uvs, indices) = obj.corners();
+    let view_dir = match args.view.as_slice() {
+        &[x, y, z] if [x, y, z].iter().all(|c| c.is_finite()) && x * x + y * y + z * z > 0.0 => {
+            [x, y, z]
+        }
+        _ => {
+            return Err(foldfree::Error::Usage(
+                "--view needs three finite numbers, not all zero".into(),
+            ))
+        }
+    };
+    let ctx = Context::new(&ContextDesc {
+        validation: args.validation,
+        device: args.device.clone(),
+        ..ContextDesc::default()
+    })?;
+    let desc = RenderDesc {
+        width: args.size,
+        height: args.size,
+        checker: args.checker,
+        view_dir,
+    };
+    let rgba = render_checker(&ctx, &positions, &uvs, &indices, &desc)?;
+    let messages = ctx.take_validation_messages();
+    if !messages.is_empty() {
+        return Err(foldfree::Error::Gpu(foldfree::gpu::GpuError::Invalid(
+            format!(
+                "{} validation message(s):\n{}",
+                messages.len(),
+                messages.join("\n")
+            ),
+        )));
+    }
+    let png =
+        encode_rgba_png(args.size, args.size, &rgba).map_err(|source| foldfree::Error::Io {
+            path: args.output.clone(),
+            source,
+        })?;
+    foldfree::viz::write_file(&args.output, &png)?;
+    println!(
+        "wrote {} ({}x{}, {} triangles, checker {})",
+        args.output.display(),
+        args.size,
+        args.size,
+        indices.len() / 3,
+        args.checker
+    );
+    Ok(())
 }
 
 fn run_stats(input: PathBuf, json: bool) -> foldfree::Result<()> {
@@ -426,6 +515,7 @@ fn main() -> ExitCode {
         Command::Stats { input, json } => run_stats(input, json),
         Command::Param(args) => run_param(*args),
         Command::Devices => run_devices(),
+        Command::Render(args) => run_render(args),
         Command::Bench {
             meshes,
             energy,

@@ -29,6 +29,10 @@ pub enum BufferUsage {
     /// Only a transfer source and destination: staging and readback buffers. No size limit
     /// beyond memory.
     Staging,
+    /// A vertex buffer for graphics pipelines (also a transfer destination for uploads).
+    Vertex,
+    /// An index buffer for graphics pipelines (also a transfer destination for uploads).
+    Index,
 }
 
 /// Where the memory lives (the allocator picks a memory type accordingly).

@@ -53,6 +53,8 @@ pub fn map_buffer_usage(usage: BufferUsage) -> vk::BufferUsageFlags {
     match usage {
         BufferUsage::Storage => vk::BufferUsageFlags::STORAGE_BUFFER | transfer,
         BufferUsage::Staging => transfer,
+        BufferUsage::Vertex => vk::BufferUsageFlags::VERTEX_BUFFER | transfer,
+        BufferUsage::Index => vk::BufferUsageFlags::INDEX_BUFFER | transfer,
     }
 }
 

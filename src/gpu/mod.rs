@@ -10,6 +10,7 @@
 //! - [`ComputePipeline`] + [`DescriptorSet`]: a kernel and the buffers bound to it.
 //! - [`Recorder`]: records dispatches, barriers ([`Access`] → [`Access`]), copies, timestamps;
 //!   submits and waits.
+//! - [`render_checker`]: an offscreen graphics render of a UV-mapped mesh with a checkerboard.
 //! - [`TimestampPool`]: GPU timestamps for per-kernel timings.
 //! - [`shaders`]: the SPIR-V compiled from `glsl/` by `build.rs`.
 
@@ -27,6 +28,7 @@ mod error;
 pub mod interop;
 mod pipeline;
 mod query;
+mod render;
 pub mod shaders;
 
 pub use buffer::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
@@ -39,6 +41,7 @@ pub use debug::MessageLog;
 pub use error::{map_result, GpuError, GpuResult, INSTALL_HINT};
 pub use pipeline::{ComputePipeline, ComputePipelineDesc, DescriptorSet, DEFAULT_WORKGROUP_SIZE};
 pub use query::TimestampPool;
+pub use render::{render_checker, RenderDesc, BACKGROUND};
 
 /// Raw Vulkan types, for hosts that bring their own device ([`Context::from_host`]).
 pub use ash::vk;

@@ -1,7 +1,8 @@
 //! The embedded SPIR-V of every kernel under `glsl/`, compiled by `build.rs`.
 //!
 //! Each `glsl/<dir>/<name>.comp` becomes a constant `<DIR>_<NAME>: &[u8]`
-//! (e.g. `glsl/test/saxpy.comp` → [`TEST_SAXPY`]).
+//! (e.g. `glsl/test/saxpy.comp` → [`TEST_SAXPY`]); vertex and fragment shaders keep their stage
+//! as a suffix (`glsl/render/checker.vert` → [`RENDER_CHECKER_VERT`]).
 
 use super::error::{GpuError, GpuResult};
 

@@ -18,6 +18,7 @@
 
 pub mod plot;
 pub mod raster;
+pub mod render;
 pub mod svg;
 
 use std::path::{Path, PathBuf};

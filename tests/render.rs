@@ -1,0 +1,292 @@
+//! `foldfree render`: the offscreen checkerboard view of a UV map. Through the binary (PNG size,
+//! foreground coverage, a visible checker) and in-process under the validation layer (with
+//! synchronization validation when `FOLDFREE_SYNC_VALIDATION=1`). Skips without Vulkan unless
+//! `REQUIRE_VULKAN=1`.
+
+#[path = "common/gpu.rs"]
+mod gpu_common;
+
+use std::fs;
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use foldfree::gpu::{render_checker, RenderDesc, BACKGROUND};
+
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(test: &str) -> TempDir {
+        let dir =
+            std::env::temp_dir().join(format!("foldfree-render-{}-{}", std::process::id(), test));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).expect("create the test's temp dir");
+        TempDir(dir)
+    }
+
+    fn join(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.0);
+    }
+}
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// Whether Vulkan is usable here (panics under `REQUIRE_VULKAN=1` when it is not).
+fn vulkan_available() -> bool {
+    gpu_common::test_context().is_some()
+}
+
+fn foldfree(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .args(args)
+        .output()
+        .expect("run foldfree")
+}
+
+fn check_ok(out: &std::process::Output, what: &str) {
+    assert!(
+        out.status.success(),
+        "{what} failed ({}):\nstdout: {}\nstderr: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Decodes an RGBA8 PNG into (width, height, pixels).
+fn decode(bytes: &[u8]) -> (u32, u32, Vec<[u8; 4]>) {
+    let mut reader = png::Decoder::new(Cursor::new(bytes))
+        .read_info()
+        .expect("PNG header");
+    let mut buf = vec![0; reader.output_buffer_size().expect("PNG buffer size")];
+    let info = reader.next_frame(&mut buf).expect("PNG image data");
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    assert_eq!(info.bit_depth, png::BitDepth::Eight);
+    let px = buf[..info.buffer_size()]
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
+    (info.width, info.height, px)
+}
+
+/// Foreground coverage, the shares of dark and light foreground pixels, and the number of
+/// dark↔light transitions along scanlines.
+struct Stats {
+    foreground: f64,
+    dark: f64,
+    light: f64,
+    transitions: usize,
+}
+
+fn luminance(p: [u8; 4]) -> f64 {
+    0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2])
+}
+
+fn stats(w: u32, h: u32, px: &[[u8; 4]]) -> Stats {
+    let bg = BACKGROUND.map(|c| (c * 255.0).round() as i32);
+    let is_fg = |p: [u8; 4]| (0..3).any(|k| (i32::from(p[k]) - bg[k]).abs() > 6);
+    const DARK: f64 = 90.0;
+    const LIGHT: f64 = 140.0;
+    let (mut fg, mut dark, mut light, mut transitions) = (0usize, 0usize, 0usize, 0usize);
+    for y in 0..h as usize {
+        // The class of the last foreground pixel on this row: Some(true) light, Some(false) dark.
+        let mut last: Option<bool> = None;
+        for x in 0..w as usize {
+            let p = px[y * w as usize + x];
+            assert_eq!(p[3], 255, "opaque picture");
+            if !is_fg(p) {
+                last = None;
+                continue;
+            }
+            fg += 1;
+            let l = luminance(p);
+            let class = if l < DARK {
+                dark += 1;
+                Some(false)
+            } else if l > LIGHT {
+                light += 1;
+                Some(true)
+            } else {
+                None
+            };
+            if let Some(c) = class {
+                if last.is_some_and(|prev| prev != c) {
+                    transitions += 1;
+                }
+                last = Some(c);
+            }
+        }
+    }
+    let fgf = fg.max(1) as f64;
+    Stats {
+        foreground: fg as f64 / (w as f64 * h as f64),
+        dark: dark as f64 / fgf,
+        light: light as f64 / fgf,
+        transitions,
+    }
+}
+
+fn render_via_cli(dir: &TempDir, uv_obj: &Path, size: u32, checker: u32) -> Stats {
+    let png_path = dir.join("view.png");
+    let size_s = size.to_string();
+    let checker_s = checker.to_string();
+    let out = foldfree(&[
+        "render",
+        uv_obj.to_str().expect("utf-8 path"),
+        "-o",
+        png_path.to_str().expect("utf-8 path"),
+        "--checker",
+        &checker_s,
+        "--size",
+        &size_s,
+        "--validation",
+    ]);
+    check_ok(&out, "foldfree render");
+    let (w, h, px) = decode(&fs::read(&png_path).expect("PNG written"));
+    assert_eq!((w, h), (size, size), "picture size");
+    stats(w, h, &px)
+}
+
+#[test]
+fn render_square_grid_after_tutte() {
+    if !vulkan_available() {
+        return;
+    }
+    let dir = TempDir::new("square");
+    let uv = dir.join("square_uv.obj");
+    let out = foldfree(&[
+        "param",
+        data("square_grid_10x10.obj").to_str().expect("utf-8 path"),
+        "-o",
+        uv.to_str().expect("utf-8 path"),
+        "--init",
+        "tutte",
+        "--solver",
+        "none",
+        "-q",
+    ]);
+    check_ok(&out, "foldfree param");
+    let s = render_via_cli(&dir, &uv, 256, 8);
+    // The flat square seen face-on fills the picture up to the 5% margin.
+    assert!(s.foreground > 0.7, "foreground {:.3}", s.foreground);
+    assert!(
+        s.dark > 0.3 && s.light > 0.3,
+        "dark {:.3} light {:.3}",
+        s.dark,
+        s.light
+    );
+    // 8 squares across (distorted by Tutte, so about 8 colour changes per row) on ~230 rows.
+    assert!(s.transitions > 1000, "{} transitions", s.transitions);
+}
+
+#[test]
+fn render_camel_after_admm() {
+    if !vulkan_available() {
+        return;
+    }
+    let dir = TempDir::new("camel");
+    let uv = dir.join("camel_uv.obj");
+    let out = foldfree(&[
+        "param",
+        data("camel_open.obj").to_str().expect("utf-8 path"),
+        "-o",
+        uv.to_str().expect("utf-8 path"),
+        "--backend",
+        "cpu",
+        "--max-iters",
+        "200",
+        "-q",
+    ]);
+    check_ok(&out, "foldfree param");
+    let s = render_via_cli(&dir, &uv, 384, 16);
+    assert!(s.foreground > 0.05, "foreground {:.3}", s.foreground);
+    assert!(
+        s.dark > 0.15 && s.light > 0.15,
+        "dark {:.3} light {:.3}",
+        s.dark,
+        s.light
+    );
+    assert!(s.transitions > 200, "{} transitions", s.transitions);
+}
+
+#[test]
+fn render_without_vt_is_a_usage_error() {
+    let dir = TempDir::new("novt");
+    let png_path = dir.join("x.png");
+    let out = foldfree(&[
+        "render",
+        data("square_grid_10x10.obj").to_str().expect("utf-8 path"),
+        "-o",
+        png_path.to_str().expect("utf-8 path"),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "exit code");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("no texture coordinates"), "{stderr}");
+    assert!(!png_path.exists(), "no picture on error");
+}
+
+/// A `n × n` grid on the unit square in the z = 0 plane, UV = xy, tilted out of plane a little
+/// (so shading varies), with one vertex per grid point.
+fn grid(n: u32) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>) {
+    let mut p = Vec::new();
+    let mut t = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (u, v) = (i as f32 / n as f32, j as f32 / n as f32);
+            p.push([u, v, 0.2 * u * v]);
+            t.push([u, v]);
+        }
+    }
+    let mut idx = Vec::new();
+    let row = n + 1;
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * row + i;
+            idx.extend_from_slice(&[a, a + 1, a + row + 1, a, a + row + 1, a + row]);
+        }
+    }
+    (p, t, idx)
+}
+
+#[test]
+fn render_in_process_is_validation_clean() {
+    gpu_common::with_test_context(|ctx| {
+        let (p, t, idx) = grid(12);
+        let desc = RenderDesc {
+            width: 200,
+            height: 120,
+            checker: 6,
+            view_dir: [0.0, 0.0, 1.0],
+        };
+        let rgba = render_checker(ctx, &p, &t, &idx, &desc).expect("render");
+        assert_eq!(rgba.len(), 200 * 120 * 4);
+        let px: Vec<[u8; 4]> = rgba
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        let s = stats(200, 120, &px);
+        assert!(s.foreground > 0.4, "foreground {:.3}", s.foreground);
+        assert!(
+            s.dark > 0.3 && s.light > 0.3,
+            "dark {:.3} light {:.3}",
+            s.dark,
+            s.light
+        );
+        assert!(s.transitions > 300, "{} transitions", s.transitions);
+        // Rendering twice gives the same pixels.
+        let again = render_checker(ctx, &p, &t, &idx, &desc).expect("render again");
+        assert_eq!(rgba, again, "deterministic");
+        // Bad input is refused before any GPU work.
+        assert!(render_checker(ctx, &p, &t, &[0, 1, 9999], &desc).is_err());
+    });
+}
