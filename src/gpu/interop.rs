@@ -12,11 +12,11 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::buffer::{Buffer, BufferUsage};
+use super::buffer::Buffer;
 use super::command::grid_1d;
 use super::context::Context;
 use super::error::{map_result, GpuError, GpuResult};
-use super::pipeline::ComputePipeline;
+use super::pipeline::{allocate_storage_set, check_storage_buffer, ComputePipeline};
 
 /// A `vk::Buffer` owned by the host application.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -136,16 +136,15 @@ pub fn min_storage_buffer_offset_alignment(ctx: &Context) -> u64 {
     props.limits.min_storage_buffer_offset_alignment.max(1)
 }
 
-/// Like [`super::DescriptorSet`], but binding may also refer to host buffers. It has its own set
-/// layout, identically defined to the pipeline's (so it binds with the pipeline's layout), and
-/// its own one-set pool. Keeps the pipeline and the owned buffers alive; the host keeps its own.
+/// Like [`super::DescriptorSet`], but binding may also refer to host buffers. It is a set of the
+/// pipeline's own set-0 layout, made by the same code as `DescriptorSet`, in its own one-set
+/// pool. Keeps the pipeline and the owned buffers alive; the host keeps its own.
 pub struct ForeignSet {
     inner: Arc<ForeignSetInner>,
 }
 
 struct ForeignSetInner {
     ctx: Context,
-    set_layout: vk::DescriptorSetLayout,
     pool: vk::DescriptorPool,
     raw: vk::DescriptorSet,
     name: String,
@@ -160,8 +159,6 @@ impl Drop for ForeignSetInner {
         // into a host command buffer the host promised to keep the set alive until it is done);
         // destroying the pool frees the set. A null pool is a no-op.
         unsafe { device.destroy_descriptor_pool(self.pool, None) };
-        // SAFETY: the only set allocated with this layout is freed above.
-        unsafe { device.destroy_descriptor_set_layout(self.set_layout, None) };
     }
 }
 
@@ -193,22 +190,11 @@ impl ForeignSet {
         let align = min_storage_buffer_offset_alignment(ctx);
         let max_range = ctx.limits().max_storage_buffer_range;
         let mut owned = Vec::new();
-        let mut infos: Vec<[vk::DescriptorBufferInfo; 1]> = Vec::with_capacity(entries.len());
+        let mut infos: Vec<vk::DescriptorBufferInfo> = Vec::with_capacity(entries.len());
         for (i, entry) in entries.iter().enumerate() {
             let info = match entry {
                 SetEntry::Owned(b) => {
-                    if b.usage() != BufferUsage::Storage {
-                        return Err(GpuError::Invalid(format!(
-                            "descriptor set {name}: buffer {} is not a storage buffer",
-                            b.name()
-                        )));
-                    }
-                    if !Arc::ptr_eq(&b.context().shared, &ctx.shared) {
-                        return Err(GpuError::Invalid(format!(
-                            "descriptor set {name}: buffer {} belongs to another context",
-                            b.name()
-                        )));
-                    }
+                    check_storage_buffer(ctx, name, b)?;
                     owned.push((*b).clone());
                     vk::DescriptorBufferInfo::default()
                         .buffer(b.raw())
@@ -235,75 +221,19 @@ impl ForeignSet {
                         .range(r.range)
                 }
             };
-            infos.push([info]);
+            infos.push(info);
         }
 
-        let device = ctx.device();
-        let mut inner = ForeignSetInner {
+        // The pipeline's own set layout: the set binds with the pipeline's layout by definition.
+        let (pool, raw) = allocate_storage_set(pipeline, name, &infos)?;
+        let inner = ForeignSetInner {
             ctx: ctx.clone(),
-            set_layout: vk::DescriptorSetLayout::null(),
-            pool: vk::DescriptorPool::null(),
-            raw: vk::DescriptorSet::null(),
+            pool,
+            raw,
             name: name.to_string(),
             pipeline: pipeline.clone(),
             _buffers: owned,
         };
-        // Identical to the layout `ComputePipeline::new` builds, so the set is compatible.
-        let bindings: Vec<vk::DescriptorSetLayoutBinding> = (0..pipeline.bindings())
-            .map(|b| {
-                vk::DescriptorSetLayoutBinding::default()
-                    .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .descriptor_count(1)
-                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
-            })
-            .collect();
-        let layout_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
-        // SAFETY: valid create info living across the call; destroyed in Drop.
-        inner.set_layout = unsafe { device.create_descriptor_set_layout(&layout_info, None) }
-            .map_err(|r| map_result("vkCreateDescriptorSetLayout", r))?;
-        ctx.set_name(inner.set_layout, &format!("{name}.set_layout"));
-
-        let sizes = [vk::DescriptorPoolSize::default()
-            .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(pipeline.bindings().max(1))];
-        let pool_info = vk::DescriptorPoolCreateInfo::default()
-            .max_sets(1)
-            .pool_sizes(&sizes);
-        // SAFETY: valid create info living across the call; destroyed in Drop.
-        inner.pool = unsafe { device.create_descriptor_pool(&pool_info, None) }
-            .map_err(|r| map_result("vkCreateDescriptorPool", r))?;
-        ctx.set_name(inner.pool, &format!("{name}.pool"));
-
-        let layouts = [inner.set_layout];
-        let alloc_info = vk::DescriptorSetAllocateInfo::default()
-            .descriptor_pool(inner.pool)
-            .set_layouts(&layouts);
-        // SAFETY: pool and layout are live; the pool has room for exactly this set.
-        let sets = unsafe { device.allocate_descriptor_sets(&alloc_info) }
-            .map_err(|r| map_result("vkAllocateDescriptorSets", r))?;
-        inner.raw = sets
-            .first()
-            .copied()
-            .ok_or_else(|| GpuError::Invalid("vkAllocateDescriptorSets returned no set".into()))?;
-        ctx.set_name(inner.raw, name);
-
-        let writes: Vec<vk::WriteDescriptorSet> = infos
-            .iter()
-            .enumerate()
-            .map(|(i, info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(inner.raw)
-                    .dst_binding(i as u32)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(info)
-            })
-            .collect();
-        if !writes.is_empty() {
-            // SAFETY: the set is live and unused; owned buffers are live (kept by the set) and
-            // the host vouched for its buffers in `ForeignBuffer::new`; ranges checked above.
-            unsafe { device.update_descriptor_sets(&writes, &[]) };
-        }
         Ok(ForeignSet {
             inner: Arc::new(inner),
         })
@@ -394,7 +324,7 @@ impl ForeignDispatch<'_> {
         unsafe {
             device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline.raw())
         };
-        // SAFETY: recording; the set's layout is identically defined to the pipeline's set 0.
+        // SAFETY: recording; the set was allocated with the pipeline's own set-0 layout.
         unsafe {
             device.cmd_bind_descriptor_sets(
                 cmd,

@@ -276,77 +276,27 @@ impl DescriptorSet {
             )));
         }
         for b in buffers {
-            if b.usage() != BufferUsage::Storage {
-                return Err(GpuError::Invalid(format!(
-                    "descriptor set {name}: buffer {} is not a storage buffer",
-                    b.name()
-                )));
-            }
-            if !Arc::ptr_eq(&b.context().shared, &ctx.shared) {
-                return Err(GpuError::Invalid(format!(
-                    "descriptor set {name}: buffer {} belongs to another context",
-                    b.name()
-                )));
-            }
+            check_storage_buffer(ctx, name, b)?;
         }
-        let device = ctx.device();
-        let mut inner = SetInner {
+        let infos: Vec<vk::DescriptorBufferInfo> = buffers
+            .iter()
+            .map(|b| {
+                vk::DescriptorBufferInfo::default()
+                    .buffer(b.raw())
+                    .offset(0)
+                    .range(vk::WHOLE_SIZE)
+            })
+            .collect();
+        let (pool, raw) = allocate_storage_set(pipeline, name, &infos)?;
+        let inner = SetInner {
             ctx: ctx.clone(),
-            pool: vk::DescriptorPool::null(),
-            raw: vk::DescriptorSet::null(),
+            pool,
+            raw,
             bindings: pipeline.bindings(),
             name: name.to_string(),
             _pipeline: pipeline.clone(),
             _buffers: buffers.iter().map(|b| (*b).clone()).collect(),
         };
-        let sizes = [vk::DescriptorPoolSize::default()
-            .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(pipeline.bindings().max(1))];
-        let pool_info = vk::DescriptorPoolCreateInfo::default()
-            .max_sets(1)
-            .pool_sizes(&sizes);
-        // SAFETY: valid create info living across the call.
-        inner.pool = unsafe { device.create_descriptor_pool(&pool_info, None) }
-            .map_err(|r| map_result("vkCreateDescriptorPool", r))?;
-        ctx.set_name(inner.pool, &format!("{name}.pool"));
-
-        let layouts = [pipeline.inner.set_layout];
-        let alloc_info = vk::DescriptorSetAllocateInfo::default()
-            .descriptor_pool(inner.pool)
-            .set_layouts(&layouts);
-        // SAFETY: pool and layout are live; the pool has room for exactly this set.
-        let sets = unsafe { device.allocate_descriptor_sets(&alloc_info) }
-            .map_err(|r| map_result("vkAllocateDescriptorSets", r))?;
-        inner.raw = sets
-            .first()
-            .copied()
-            .ok_or_else(|| GpuError::Invalid("vkAllocateDescriptorSets returned no set".into()))?;
-        ctx.set_name(inner.raw, name);
-
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
-            .iter()
-            .map(|b| {
-                [vk::DescriptorBufferInfo::default()
-                    .buffer(b.raw())
-                    .offset(0)
-                    .range(vk::WHOLE_SIZE)]
-            })
-            .collect();
-        let writes: Vec<vk::WriteDescriptorSet> = infos
-            .iter()
-            .enumerate()
-            .map(|(i, info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(inner.raw)
-                    .dst_binding(i as u32)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(info)
-            })
-            .collect();
-        if !writes.is_empty() {
-            // SAFETY: the set and buffers are live and not in use by any command buffer yet.
-            unsafe { device.update_descriptor_sets(&writes, &[]) };
-        }
         Ok(DescriptorSet {
             inner: Arc::new(inner),
         })
@@ -364,4 +314,80 @@ impl DescriptorSet {
     pub(crate) fn raw(&self) -> vk::DescriptorSet {
         self.inner.raw
     }
+}
+
+/// Refuses a buffer that is not a storage buffer of `ctx` (binding it would be invalid usage).
+pub(super) fn check_storage_buffer(ctx: &Context, set_name: &str, b: &Buffer) -> GpuResult<()> {
+    if b.usage() != BufferUsage::Storage {
+        return Err(GpuError::Invalid(format!(
+            "descriptor set {set_name}: buffer {} is not a storage buffer",
+            b.name()
+        )));
+    }
+    if !Arc::ptr_eq(&b.context().shared, &ctx.shared) {
+        return Err(GpuError::Invalid(format!(
+            "descriptor set {set_name}: buffer {} belongs to another context",
+            b.name()
+        )));
+    }
+    Ok(())
+}
+
+/// A one-set descriptor pool and a set of `pipeline`'s set-0 layout whose storage binding `i`
+/// is `infos[i]`: the one place descriptor sets are made ([`DescriptorSet`] and the interop set
+/// for host buffers). The caller owns the pool; destroying it frees the set. The buffers must be
+/// live and the ranges valid (the callers check).
+pub(super) fn allocate_storage_set(
+    pipeline: &ComputePipeline,
+    name: &str,
+    infos: &[vk::DescriptorBufferInfo],
+) -> GpuResult<(vk::DescriptorPool, vk::DescriptorSet)> {
+    let ctx = pipeline.context();
+    let device = ctx.device();
+    let sizes = [vk::DescriptorPoolSize::default()
+        .ty(vk::DescriptorType::STORAGE_BUFFER)
+        .descriptor_count(pipeline.bindings().max(1))];
+    let pool_info = vk::DescriptorPoolCreateInfo::default()
+        .max_sets(1)
+        .pool_sizes(&sizes);
+    // SAFETY: valid create info living across the call.
+    let pool = unsafe { device.create_descriptor_pool(&pool_info, None) }
+        .map_err(|r| map_result("vkCreateDescriptorPool", r))?;
+    ctx.set_name(pool, &format!("{name}.pool"));
+
+    let layouts = [pipeline.inner.set_layout];
+    let alloc_info = vk::DescriptorSetAllocateInfo::default()
+        .descriptor_pool(pool)
+        .set_layouts(&layouts);
+    // SAFETY: pool and layout are live; the pool has room for exactly this set.
+    let raw = match unsafe { device.allocate_descriptor_sets(&alloc_info) } {
+        Ok(sets) if !sets.is_empty() => sets[0],
+        failed => {
+            // SAFETY: the pool was just created and nothing from it is in use.
+            unsafe { device.destroy_descriptor_pool(pool, None) };
+            return Err(match failed {
+                Err(r) => map_result("vkAllocateDescriptorSets", r),
+                Ok(_) => GpuError::Invalid("vkAllocateDescriptorSets returned no set".into()),
+            });
+        }
+    };
+    ctx.set_name(raw, name);
+
+    let writes: Vec<vk::WriteDescriptorSet> = infos
+        .iter()
+        .enumerate()
+        .map(|(i, info)| {
+            vk::WriteDescriptorSet::default()
+                .dst_set(raw)
+                .dst_binding(i as u32)
+                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .buffer_info(std::slice::from_ref(info))
+        })
+        .collect();
+    if !writes.is_empty() {
+        // SAFETY: the set is new and unused; the callers checked the buffers are live and the
+        // ranges inside them.
+        unsafe { device.update_descriptor_sets(&writes, &[]) };
+    }
+    Ok((pool, raw))
 }
