@@ -29,6 +29,10 @@ enum Expect {
 
 use Expect::{Error, Valid};
 
+#[path = "common/tempdir.rs"]
+mod tempdir;
+use tempdir::TempDir;
+
 struct Case {
     file: &'static str,
     param: Expect,
@@ -198,41 +202,6 @@ fn case(file: &str) -> &'static Case {
         .iter()
         .find(|c| c.file == file)
         .unwrap_or_else(|| panic!("{file}: no row in CASES"))
-}
-
-/// A fresh directory per test, removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(test: &str) -> TempDir {
-        let dir =
-            std::env::temp_dir().join(format!("foldfree-bad-{}-{}", std::process::id(), test));
-        let _ = fs::remove_dir_all(&dir);
-        fs::create_dir_all(&dir).expect("create the test's temp dir");
-        TempDir(dir)
-    }
-
-    fn join(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-
-    fn entries(&self) -> BTreeSet<String> {
-        fs::read_dir(&self.0)
-            .expect("list the temp dir")
-            .map(|e| {
-                e.expect("read a temp dir entry")
-                    .file_name()
-                    .to_string_lossy()
-                    .into_owned()
-            })
-            .collect()
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = fs::remove_dir_all(&self.0);
-    }
 }
 
 /// What a finished run of the binary produced.

@@ -12,6 +12,10 @@ use std::process::Command;
 
 use serde_json::Value;
 
+#[path = "common/tempdir.rs"]
+mod tempdir;
+use tempdir::TempDir;
+
 /// Valid disks: `param` writes a map, `stats` says "disk: yes".
 const VALID: [&str; 5] = [
     "single_triangle",
@@ -35,55 +39,6 @@ fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data")
         .join(format!("{name}.obj"))
-}
-
-/// A fresh directory per test, removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(test: &str) -> TempDir {
-        let dir =
-            std::env::temp_dir().join(format!("foldfree-cli-{}-{}", std::process::id(), test));
-        let _ = fs::remove_dir_all(&dir);
-        fs::create_dir_all(&dir).expect("create the test's temp dir");
-        TempDir(dir)
-    }
-
-    fn join(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-
-    /// Names of the entries in the directory, sorted.
-    fn entries(&self) -> BTreeSet<String> {
-        fs::read_dir(&self.0)
-            .expect("list the temp dir")
-            .map(|e| {
-                e.expect("read a temp dir entry")
-                    .file_name()
-                    .to_string_lossy()
-                    .into_owned()
-            })
-            .collect()
-    }
-
-    /// Asserts that no hidden (temporary) file is left in the directory.
-    fn assert_no_temp_files(&self, context: &str) {
-        let hidden: Vec<String> = self
-            .entries()
-            .into_iter()
-            .filter(|n| n.starts_with('.'))
-            .collect();
-        assert!(
-            hidden.is_empty(),
-            "{context}: temporary files left behind: {hidden:?}"
-        );
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = fs::remove_dir_all(&self.0);
-    }
 }
 
 /// What a run of the binary did.
