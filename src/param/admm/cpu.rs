@@ -179,7 +179,9 @@ impl Executor for CpuExecutor<'_> {
     }
 
     fn iterate(&mut self, n: usize, mu: f64) -> crate::Result<Residuals> {
-        let mut a_prev = self.state.a.clone();
+        // The `A` before the last iteration, for the dual residual (n ≥ 1 so it is always set).
+        let n = n.max(1);
+        let mut a_prev = Vec::new();
         for k in 0..n {
             if k + 1 == n {
                 a_prev.clone_from(&self.state.a);
