@@ -77,6 +77,13 @@ enum SolverArg {
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
+enum CutArg {
+    Auto,
+    None,
+    Always,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
 enum EnergyArg {
     /// Conformal: MIPS.
     Mips,
@@ -146,6 +153,16 @@ struct ParamArgs {
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Cutting into disk charts: `auto` cuts meshes that are not a disk (closed, any genus,
+    /// several holes or components), `none` refuses them, `always` also packs a disk.
+    #[arg(long, value_enum, default_value = "auto")]
+    cut: CutArg,
+    /// Gap between packed charts and to the border, as a fraction of the unit square's side.
+    #[arg(long, default_value_t = 0.005)]
+    margin: f64,
+    /// How strongly seams prefer curved regions (0 = shortest seams).
+    #[arg(long, default_value_t = 1.0)]
+    seam_curvature: f64,
     /// Enable the Khronos validation layer (any message fails the run).
     #[arg(long)]
     validation: bool,
@@ -432,6 +449,25 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     job.validation = args.validation;
     job.profile = args.profile;
     job.admm = admm;
+    job.cut = match args.cut {
+        CutArg::Auto => pipeline::CutMode::Auto,
+        CutArg::None => pipeline::CutMode::Never,
+        CutArg::Always => pipeline::CutMode::Always,
+    };
+    if !(args.margin.is_finite() && (0.0..0.2).contains(&args.margin)) {
+        return Err(foldfree::Error::Usage(format!(
+            "--margin {} is outside [0, 0.2)",
+            args.margin
+        )));
+    }
+    job.pack.margin = args.margin;
+    if !(args.seam_curvature.is_finite() && args.seam_curvature >= 0.0) {
+        return Err(foldfree::Error::Usage(format!(
+            "--seam-curvature {} must be a finite number >= 0",
+            args.seam_curvature
+        )));
+    }
+    job.cut_options.curvature_weight = args.seam_curvature;
 
     let bar = if args.quiet || solver == SolverChoice::None {
         indicatif::ProgressBar::hidden()
@@ -496,6 +532,16 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         r.boundary_self_intersections,
         r.seconds
     );
+    if let Some(a) = &r.atlas {
+        eprintln!(
+            "  cut: {} chart(s), {} seam edges (length {:.4}), {} vt; packing efficiency {:.1}%",
+            a.charts,
+            a.seam_edges,
+            a.seam_length,
+            a.texture_coordinates,
+            100.0 * a.packing_efficiency
+        );
+    }
     if let Some(t) = &r.kernel_times {
         let per = |ns: u64| ns as f64 / 1e3 / t.iterations.max(1) as f64;
         eprintln!(

@@ -40,6 +40,20 @@ pub enum BackendChoice {
     Vulkan,
 }
 
+/// When `foldfree param` cuts the mesh into disk charts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum CutMode {
+    /// Cut only meshes that are not a single disk (closed, higher genus, several holes, several
+    /// components).
+    #[default]
+    Auto,
+    /// Never cut: a mesh that is not a disk is an error.
+    Never,
+    /// Always go through the cutting and packing path, even for a disk (one chart, packed into
+    /// the unit square).
+    Always,
+}
+
 /// Everything `foldfree param` needs.
 #[derive(Clone, Debug)]
 pub struct ParamJob {
@@ -56,6 +70,9 @@ pub struct ParamJob {
     pub profile: bool,
     pub admm: AdmmOptions,
     pub validate: mesh::validate::ValidateOptions,
+    pub cut: CutMode,
+    pub cut_options: crate::param::cut::CutOptions,
+    pub pack: crate::param::pack::PackOptions,
 }
 
 impl ParamJob {
@@ -72,13 +89,19 @@ impl ParamJob {
             profile: false,
             admm: AdmmOptions::default(),
             validate: mesh::validate::ValidateOptions::default(),
+            cut: CutMode::Auto,
+            cut_options: Default::default(),
+            pack: Default::default(),
         }
     }
 }
 
 /// Output of [`run_param`]: the map and its report (already written to `job.output`).
 pub struct ParamOutput {
+    /// The mesh the UVs belong to: the input, or the input split along its seams when it was
+    /// cut (same faces in the same order, one vertex per UV).
     pub mesh: TriMesh,
+    /// One UV per vertex of `mesh`.
     pub uv: Vec<[f64; 2]>,
     pub report: ParamReport,
 }
@@ -274,7 +297,9 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
         )));
     }
     let (mesh, topo, vreport) = mesh::load(&job.input, &job.validate)?;
-    topo.require_disk(&job.input)?;
+    if job.cut == CutMode::Never || (job.cut == CutMode::Auto && topo.is_disk()) {
+        topo.require_disk(&job.input)?;
+    }
     let t_load = t0.elapsed().as_secs_f64();
 
     let ctx = if job.solver == SolverChoice::Admm {
@@ -282,6 +307,18 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     } else {
         None
     };
+    if job.cut == CutMode::Always || !topo.is_disk() {
+        return run_atlas(
+            job,
+            mesh,
+            &topo,
+            &vreport,
+            ctx.as_ref(),
+            t0,
+            t_load,
+            progress,
+        );
+    }
     let map = compute_map(
         &mesh,
         &topo,
@@ -300,11 +337,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     })?;
 
     let mut report = ParamReport {
-        init: match job.init {
-            InitMethod::Tutte(TutteWeights::Uniform) => "tutte".into(),
-            InitMethod::Tutte(TutteWeights::MeanValue) => "tutte_mean_value".into(),
-            InitMethod::Lscm => "lscm".into(),
-        },
+        init: init_name(job.init).into(),
         init_flips: map.init_flips,
         backend: "cpu".into(),
         device: "host CPU".into(),
@@ -317,13 +350,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
         report.backend = result.backend.into();
         report.device = result.device;
         report.solver = "admm".into();
-        report.energy = Some(
-            match job.admm.energy {
-                Energy::Mips => "mips",
-                Energy::SymmetricDirichlet => "sd",
-            }
-            .into(),
-        );
+        report.energy = Some(energy_name(job.admm.energy).into());
         report.iterations = result.iterations;
         report.converged = Some(result.converged);
         report.mu_rel = Some(result.mu_rel_final);
@@ -348,6 +375,170 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     report.seconds_solve = map.seconds_solve;
     report.seconds = t0.elapsed().as_secs_f64();
     Ok(ParamOutput { mesh, uv, report })
+}
+
+fn init_name(init: InitMethod) -> &'static str {
+    match init {
+        InitMethod::Tutte(TutteWeights::Uniform) => "tutte",
+        InitMethod::Tutte(TutteWeights::MeanValue) => "tutte_mean_value",
+        InitMethod::Lscm => "lscm",
+    }
+}
+
+/// The cutting path of [`run_param`]: cut into disk charts, map each chart, pack the charts
+/// into [0,1]², write the OBJ with the input's `v` (count and order) and one `vt` per split
+/// vertex (`f v/vt`), and report seams, charts and packing.
+#[allow(clippy::too_many_arguments)]
+fn run_atlas(
+    job: &ParamJob,
+    input: TriMesh,
+    topo: &Topology,
+    vreport: &mesh::ValidationReport,
+    ctx: Option<&crate::gpu::Context>,
+    t0: Instant,
+    t_load: f64,
+    progress: &mut dyn FnMut(&History),
+) -> Result<ParamOutput> {
+    use crate::param::{cut, pack};
+    let t_cut = Instant::now();
+    let cutm = cut::cut_to_disks(&input, topo, &job.cut_options, &job.input)?;
+    let seconds_cut = t_cut.elapsed().as_secs_f64();
+
+    let mut uv = vec![[0.0f64; 2]; cutm.mesh.positions.len()];
+    let mut chart_meshes = Vec::with_capacity(cutm.charts.len());
+    let mut report = ParamReport {
+        init: init_name(job.init).into(),
+        backend: "cpu".into(),
+        device: "host CPU".into(),
+        solver: "none".into(),
+        ..ParamReport::default()
+    };
+    let mut seconds_init = 0.0;
+    let mut seconds_solve = 0.0;
+    let mut converged = true;
+    let mut largest = 0usize;
+    for faces in &cutm.charts {
+        let (sub, global) = cutm.chart_mesh(faces);
+        let sub_topo = Topology::build(&sub, &job.input)?;
+        let map = compute_map(
+            &sub,
+            &sub_topo,
+            job.init,
+            job.solver,
+            &job.admm,
+            ctx,
+            job.profile,
+            progress,
+        )?;
+        for (l, &g) in global.iter().enumerate() {
+            uv[g as usize] = map.uv[l];
+        }
+        seconds_init += map.seconds_init;
+        seconds_solve += map.seconds_solve;
+        report.init_flips += map.init_flips;
+        if let Some(result) = map.admm {
+            report.backend = result.backend.into();
+            report.device = result.device;
+            report.solver = "admm".into();
+            report.iterations += result.iterations;
+            converged &= result.converged;
+            // The convergence plot shows the largest chart.
+            if faces.len() > largest {
+                largest = faces.len();
+                report.history = result.history;
+                report.mu_rel = Some(result.mu_rel_final);
+            }
+        }
+        chart_meshes.push((global, sub));
+    }
+    if report.solver == "admm" {
+        report.converged = Some(converged);
+        report.energy = Some(energy_name(job.admm.energy).into());
+    }
+
+    let frames = mesh::frames::compute(&cutm.mesh);
+    let chart_faces: Vec<Vec<[u32; 3]>> = cutm
+        .charts
+        .iter()
+        .map(|fs| fs.iter().map(|&f| cutm.mesh.faces[f as usize]).collect())
+        .collect();
+    let refs: Vec<pack::ChartRef> = chart_meshes
+        .iter()
+        .zip(&chart_faces)
+        .zip(&cutm.charts)
+        .map(|(((global, _), faces), fs)| pack::ChartRef {
+            vertices: global,
+            faces,
+            area_3d: fs.iter().map(|&f| frames.area[f as usize]).sum(),
+        })
+        .collect();
+    let packing = pack::pack(&mut uv, &refs, &job.pack);
+
+    let split_topo = Topology::build(&cutm.mesh, &job.input)?;
+    let m = metrics::evaluate(
+        &cutm.mesh.positions,
+        &cutm.mesh.faces,
+        &uv,
+        &split_topo.boundary_loops,
+    );
+    if m.flips > 0 || uv.iter().any(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        return Err(crate::linalg::SolveError::Failed {
+            what: format!(
+                "the packed atlas has {} flipped faces or non-finite UVs; nothing was written",
+                m.flips
+            ),
+        }
+        .into());
+    }
+    mesh::obj::write_obj_with_corner_uv(&job.output, &input, &uv, &cutm.mesh.faces).map_err(
+        |source| Error::Io {
+            path: job.output.clone(),
+            source,
+        },
+    )?;
+
+    report.input = job.input.display().to_string();
+    report.output = job.output.display().to_string();
+    report.vertices = input.positions.len();
+    report.faces = input.faces.len();
+    report.interior_edges = topo.interior_edges.len() - cutm.seam_edges.len();
+    report.boundary_loops = topo.boundary_loops.len();
+    report.unreferenced_vertices = vreport.unreferenced_vertices.len();
+    report.flips = m.flips;
+    report.delta_con_mean = m.delta_con_mean;
+    report.delta_con_area_mean = m.delta_con_area_mean;
+    report.delta_con_max = m.delta_con_max;
+    report.mips_energy = m.mips_energy;
+    report.sd_energy = m.sd_energy;
+    report.boundary_self_intersections = m.boundary_self_intersections;
+    report.atlas = Some(crate::report::AtlasReport {
+        charts: cutm.charts.len(),
+        chart_faces: cutm.charts.iter().map(Vec::len).collect(),
+        texture_coordinates: uv.len(),
+        seam_edges: cutm.seam_edges.len(),
+        seam_length: cutm.seam_length,
+        genus: topo.genus(),
+        components: topo.components,
+        packing_efficiency: packing.efficiency,
+        margin: job.pack.margin,
+        seconds_cut,
+    });
+    report.seconds_load = t_load;
+    report.seconds_init = seconds_init;
+    report.seconds_solve = seconds_solve;
+    report.seconds = t0.elapsed().as_secs_f64();
+    Ok(ParamOutput {
+        mesh: cutm.mesh,
+        uv,
+        report,
+    })
+}
+
+fn energy_name(e: Energy) -> &'static str {
+    match e {
+        Energy::Mips => "mips",
+        Energy::SymmetricDirichlet => "sd",
+    }
 }
 
 /// Writes `report` as pretty JSON, atomically.

@@ -41,4 +41,29 @@ pub struct ParamReport {
     /// Bytes the kernels read and write per iteration (Vulkan only), for bandwidth estimates.
     pub bytes_per_iteration: Option<u64>,
     pub history: Vec<crate::param::admm::History>,
+    /// Seams, charts and packing, when the mesh was cut into charts.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub atlas: Option<AtlasReport>,
+}
+
+/// What cutting and packing did (`foldfree param` on a mesh that is not a disk).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct AtlasReport {
+    pub charts: usize,
+    /// Faces per chart.
+    pub chart_faces: Vec<usize>,
+    /// `vt` records written (split vertices).
+    pub texture_coordinates: usize,
+    /// Input edges cut open.
+    pub seam_edges: usize,
+    /// Their total 3D length.
+    pub seam_length: f64,
+    /// Genus of the input (summed over components), when defined.
+    pub genus: Option<i64>,
+    pub components: usize,
+    /// Σ chart UV area / area of the unit square.
+    pub packing_efficiency: f64,
+    /// Gap between charts and to the border, as a fraction of the square's side.
+    pub margin: f64,
+    pub seconds_cut: f64,
 }

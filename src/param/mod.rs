@@ -2,7 +2,9 @@
 #![forbid(unsafe_code)]
 
 pub mod admm;
+pub mod cut;
 pub mod energy;
+pub mod pack;
 pub mod recover;
 
 pub use energy::Energy;
