@@ -1,0 +1,287 @@
+//! Meshes that are not disks: `foldfree param` cuts them into disk charts, maps each chart and
+//! packs the charts into [0,1]². Each written OBJ is checked from the file alone: the input's
+//! `v` records unchanged, every chart (faces joined through shared `vt`) a disk with 0 flips,
+//! charts pairwise disjoint inside the unit square, and the report's metrics equal to an
+//! independent recomputation (tests/common/objcheck.rs).
+
+#[path = "common/objcheck.rs"]
+mod objcheck;
+#[path = "common/tempdir.rs"]
+mod tempdir;
+
+use std::collections::HashMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde_json::Value;
+use tempdir::TempDir;
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(format!("{name}.obj"))
+}
+
+fn foldfree(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .args(args)
+        .output()
+        .expect("run foldfree");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+/// Charts of an OBJ: faces joined when they share a `vt` index (seams split `vt`, not `v`).
+fn charts(obj: &objcheck::Obj) -> Vec<Vec<usize>> {
+    let mut parent: Vec<usize> = (0..obj.f_v.len()).collect();
+    fn root(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
+    let mut first: HashMap<usize, usize> = HashMap::new();
+    for (f, t) in obj.f_vt.iter().enumerate() {
+        for &t in t.as_ref().expect("every face has vt") {
+            match first.get(&t) {
+                Some(&g) => {
+                    let (a, b) = (root(&mut parent, f), root(&mut parent, g));
+                    parent[a] = b;
+                }
+                None => {
+                    first.insert(t, f);
+                }
+            }
+        }
+    }
+    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+    for f in 0..obj.f_v.len() {
+        let r = root(&mut parent, f);
+        groups.entry(r).or_default().push(f);
+    }
+    let mut out: Vec<Vec<usize>> = groups.into_values().collect();
+    out.sort();
+    out
+}
+
+/// χ and boundary-loop count of a chart, counted on `vt` indices: a disk has χ = 1 and one loop.
+fn chart_topology(obj: &objcheck::Obj, faces: &[usize]) -> (i64, usize) {
+    let mut edges: HashMap<(usize, usize), usize> = HashMap::new();
+    let mut verts = std::collections::HashSet::new();
+    for &f in faces {
+        let t = obj.f_vt[f].expect("vt");
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            verts.insert(a);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    let boundary: Vec<(usize, usize)> = edges
+        .iter()
+        .filter(|(_, &n)| n == 1)
+        .map(|(&e, _)| e)
+        .collect();
+    // Loops = connected components of the boundary-edge graph.
+    let mut adj: HashMap<usize, Vec<usize>> = HashMap::new();
+    for &(a, b) in &boundary {
+        adj.entry(a).or_default().push(b);
+        adj.entry(b).or_default().push(a);
+    }
+    let mut seen = std::collections::HashSet::new();
+    let mut loops = 0;
+    for &start in adj.keys() {
+        if !seen.insert(start) {
+            continue;
+        }
+        loops += 1;
+        let mut stack = vec![start];
+        while let Some(v) = stack.pop() {
+            for &w in &adj[&v] {
+                if seen.insert(w) {
+                    stack.push(w);
+                }
+            }
+        }
+    }
+    assert!(edges.values().all(|&n| n <= 2), "a vt edge has 3 faces");
+    let chi = verts.len() as i64 - edges.len() as i64 + faces.len() as i64;
+    (chi, loops)
+}
+
+/// Runs `param` on `input` and checks the written atlas; returns the report.
+fn check_atlas(input: &Path, dir: &TempDir, extra: &[&str], expect_charts: usize) -> Value {
+    let out = dir.join("out.obj");
+    let rep = dir.join("out.json");
+    let mut args = vec![
+        "param",
+        input.to_str().expect("utf-8 path"),
+        "-o",
+        out.to_str().expect("utf-8 path"),
+        "--report",
+        rep.to_str().expect("utf-8 path"),
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    let (code, stderr) = foldfree(&args);
+    assert_eq!(code, Some(0), "{stderr}");
+
+    let src = objcheck::parse_obj(&fs::read_to_string(input).expect("read input")).expect("input");
+    let obj = objcheck::parse_obj(&fs::read_to_string(&out).expect("read output")).expect("output");
+    assert_eq!(obj.v, src.v, "v records must be the input's, in order");
+    assert_eq!(obj.f_v, src.f_v, "faces must be the input's, in order");
+    assert!(obj.vt.len() >= src.v.len() - 2, "vt: {}", obj.vt.len());
+
+    let report: Value =
+        serde_json::from_str(&fs::read_to_string(&rep).expect("read report")).expect("json");
+    let m = objcheck::metrics(&obj).expect("metrics");
+    assert_eq!(m.flips, 0);
+    assert_eq!(report["flips"], 0);
+    for key in [
+        "delta_con_mean",
+        "mips_energy",
+        "sd_energy",
+        "delta_con_max",
+    ] {
+        let r = report[key].as_f64().expect(key);
+        let x = match key {
+            "delta_con_mean" => m.delta_con_mean,
+            "mips_energy" => m.mips_energy,
+            "sd_energy" => m.sd_energy,
+            _ => m.delta_con_max,
+        };
+        assert!(
+            (r - x).abs() <= 1e-6 * x.abs().max(1.0),
+            "{key}: report {r} vs file {x}"
+        );
+    }
+
+    let groups = charts(&obj);
+    assert_eq!(groups.len(), expect_charts);
+    assert_eq!(report["atlas"]["charts"], expect_charts);
+    assert_eq!(
+        report["atlas"]["texture_coordinates"].as_u64(),
+        Some(obj.vt.len() as u64)
+    );
+    let mut boxes = Vec::new();
+    for g in &groups {
+        assert_eq!(chart_topology(&obj, g), (1, 1), "chart is not a disk");
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for &f in g {
+            for t in obj.f_vt[f].expect("vt") {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(obj.vt[t][k]);
+                    hi[k] = hi[k].max(obj.vt[t][k]);
+                }
+            }
+        }
+        assert!(lo[0] >= 0.0 && lo[1] >= 0.0 && hi[0] <= 1.0 && hi[1] <= 1.0);
+        boxes.push((lo, hi));
+    }
+    for i in 0..boxes.len() {
+        for j in 0..i {
+            let (a, b) = (boxes[i], boxes[j]);
+            let apart = a.1[0] < b.0[0] || b.1[0] < a.0[0] || a.1[1] < b.0[1] || b.1[1] < a.0[1];
+            assert!(apart, "charts {i} and {j} overlap: {a:?} {b:?}");
+        }
+    }
+    let eff = report["atlas"]["packing_efficiency"].as_f64().expect("eff");
+    assert!(eff > 0.05 && eff <= 1.0, "packing efficiency {eff}");
+    report
+}
+
+#[test]
+fn closed_genus0_bunny_becomes_one_disk() {
+    let dir = TempDir::new("atlas_bunny");
+    let r = check_atlas(&data("bunny_npm"), &dir, &["--max-iters", "200"], 1);
+    assert_eq!(r["atlas"]["genus"], 0);
+    assert!(r["atlas"]["seam_edges"].as_u64().expect("seams") >= 2);
+}
+
+#[test]
+fn genus3_block_becomes_one_disk() {
+    let dir = TempDir::new("atlas_block");
+    let r = check_atlas(
+        &data("block"),
+        &dir,
+        &["--max-iters", "100", "--energy", "sd"],
+        1,
+    );
+    assert_eq!(r["atlas"]["genus"], 3);
+}
+
+#[test]
+fn several_components_are_packed_apart() {
+    let dir = TempDir::new("atlas_components");
+    // Three disjoint copies of a closed mesh, scaled differently: three charts.
+    let text = fs::read_to_string(data("bunny_npm")).expect("read");
+    let src = objcheck::parse_obj(&text).expect("parse");
+    let mut out = String::from("# three scaled copies of bunny_npm\n");
+    for (i, s) in [1.0, 0.5, 0.25].iter().enumerate() {
+        for p in &src.v {
+            out += &format!(
+                "v {} {} {}\n",
+                p[0] * s + 10.0 * i as f64,
+                p[1] * s,
+                p[2] * s
+            );
+        }
+    }
+    let n = src.v.len();
+    for i in 0..3 {
+        for f in &src.f_v {
+            out += &format!(
+                "f {} {} {}\n",
+                f[0] + 1 + i * n,
+                f[1] + 1 + i * n,
+                f[2] + 1 + i * n
+            );
+        }
+    }
+    let input = dir.join("three.obj");
+    fs::write(&input, out).expect("write");
+    let r = check_atlas(&input, &dir, &["--solver", "none", "--margin", "0.02"], 3);
+    let faces: Vec<u64> = r["atlas"]["chart_faces"]
+        .as_array()
+        .expect("array")
+        .iter()
+        .map(|v| v.as_u64().expect("n"))
+        .collect();
+    assert_eq!(faces, vec![src.f_v.len() as u64; 3]);
+}
+
+#[test]
+fn disk_with_cut_always_is_packed_into_the_unit_square() {
+    let dir = TempDir::new("atlas_disk");
+    let r = check_atlas(
+        &data("square_grid_10x10"),
+        &dir,
+        &["--cut", "always", "--solver", "none", "--init", "lscm"],
+        1,
+    );
+    assert_eq!(r["atlas"]["seam_edges"], 0);
+    // A flat square maps to a square: the packing fills the unit square up to the margin.
+    let eff = r["atlas"]["packing_efficiency"].as_f64().expect("eff");
+    assert!(eff > 0.97, "{eff}");
+}
+
+#[test]
+fn cut_none_refuses_a_closed_mesh() {
+    let dir = TempDir::new("atlas_none");
+    let out = dir.join("out.obj");
+    let (code, stderr) = foldfree(&[
+        "param",
+        data("bunny_npm").to_str().expect("utf-8"),
+        "-o",
+        out.to_str().expect("utf-8"),
+        "--cut",
+        "none",
+    ]);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(stderr.contains("closed surface of genus 0"), "{stderr}");
+    assert!(!out.exists());
+}
