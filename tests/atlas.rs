@@ -285,3 +285,49 @@ fn cut_none_refuses_a_closed_mesh() {
     assert!(stderr.contains("closed surface of genus 0"), "{stderr}");
     assert!(!out.exists());
 }
+
+/// The acceptance sweep over the shared meshes that are not disks (closed, open with several
+/// holes, CAD). Not part of `cargo test` (tests must not need `../shared`): run it with
+/// `FOLDFREE_SHARED_MESHES=../shared/meshes cargo test --release --test atlas -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn shared_meshes_sweep() {
+    let Ok(root) = std::env::var("FOLDFREE_SHARED_MESHES") else {
+        panic!("set FOLDFREE_SHARED_MESHES to the shared meshes folder");
+    };
+    let iters = std::env::var("FOLDFREE_SWEEP_ITERS").unwrap_or_else(|_| "2000".into());
+    for name in [
+        "closed/bunny_npm",
+        "closed/cheburashka",
+        "closed/fertility",
+        "closed/spot",
+        "open/stanford_bunny_scan",
+        "cad/block",
+        "cad/fandisk",
+        "cad/rocker_arm",
+    ] {
+        let input = Path::new(&root).join(format!("{name}.obj"));
+        let dir = TempDir::new(&format!("sweep_{}", name.replace('/', "_")));
+        for energy in ["mips", "sd"] {
+            let r = check_atlas(
+                &input,
+                &dir,
+                &["--energy", energy, "--max-iters", &iters],
+                1,
+            );
+            println!(
+                "| {name} | {energy} | {} | {} | {:.4} | {:.1}% | {} | {:.4} | {:.4} | {} | {} | {:.1} |",
+                r["faces"],
+                r["atlas"]["seam_edges"],
+                r["atlas"]["seam_length"].as_f64().unwrap_or(f64::NAN),
+                100.0 * r["atlas"]["packing_efficiency"].as_f64().unwrap_or(f64::NAN),
+                r["flips"],
+                r["delta_con_mean"].as_f64().unwrap_or(f64::NAN),
+                r["sd_energy"].as_f64().unwrap_or(f64::NAN),
+                r["iterations"],
+                r["converged"],
+                r["seconds"].as_f64().unwrap_or(f64::NAN),
+            );
+        }
+    }
+}
