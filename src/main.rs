@@ -153,6 +153,10 @@ struct ParamArgs {
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// When the solver does not converge (iteration cap, Ctrl-C), still write the best
+    /// flip-free map it found. The exit code is 1 either way.
+    #[arg(long)]
+    keep_best: bool,
     /// Cutting into disk charts: `auto` cuts meshes that are not a disk (closed, any genus,
     /// several holes or components), `none` refuses them, `always` also packs a disk.
     #[arg(long, value_enum, default_value = "auto")]
@@ -449,6 +453,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     job.validation = args.validation;
     job.profile = args.profile;
     job.admm = admm;
+    job.keep_best = args.keep_best;
     job.cut = match args.cut {
         CutArg::Auto => pipeline::CutMode::Auto,
         CutArg::None => pipeline::CutMode::Never,
@@ -514,8 +519,12 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         r.solver,
         match r.converged {
             Some(true) => format!(", converged in {} iterations", r.iterations),
+            Some(false) if r.written => format!(
+                ", NOT converged after {} iterations (best flip-free map written: --keep-best)",
+                r.iterations
+            ),
             Some(false) => format!(
-                ", NOT converged after {} iterations (best flip-free map written)",
+                ", NOT converged after {} iterations (nothing written)",
                 r.iterations
             ),
             None => String::new(),
@@ -551,6 +560,22 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
             per(t.dual_update_ns),
             t.residual_ns as f64 / 1e3 / r.history.len().max(1) as f64
         );
+    }
+    if r.converged == Some(false) {
+        return Err(foldfree::Error::Solve(
+            foldfree::linalg::SolveError::Failed {
+                what: format!(
+                    "{}: the solver did not converge in {} iterations; {}",
+                    r.input,
+                    r.iterations,
+                    if r.written {
+                        "the best flip-free map was written (--keep-best)"
+                    } else {
+                        "nothing was written (--keep-best writes the best flip-free map)"
+                    }
+                ),
+            },
+        ));
     }
     Ok(())
 }

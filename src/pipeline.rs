@@ -70,6 +70,9 @@ pub struct ParamJob {
     pub profile: bool,
     pub admm: AdmmOptions,
     pub validate: mesh::validate::ValidateOptions,
+    /// Write the best flip-free map even when the solver did not converge (the run still
+    /// reports the non-convergence; the CLI exits 1).
+    pub keep_best: bool,
     pub cut: CutMode,
     pub cut_options: crate::param::cut::CutOptions,
     pub pack: crate::param::pack::PackOptions,
@@ -89,6 +92,7 @@ impl ParamJob {
             profile: false,
             admm: AdmmOptions::default(),
             validate: mesh::validate::ValidateOptions::default(),
+            keep_best: false,
             cut: CutMode::Auto,
             cut_options: Default::default(),
             pack: Default::default(),
@@ -331,10 +335,14 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     )?;
     let uv = map.uv;
     let m = metrics::evaluate(&mesh.positions, &mesh.faces, &uv, &topo.boundary_loops);
-    mesh::obj::write_obj_with_uv(&job.output, &mesh, &uv).map_err(|source| Error::Io {
-        path: job.output.clone(),
-        source,
-    })?;
+    let converged = map.admm.as_ref().map_or(true, |r| r.converged);
+    let written = converged || job.keep_best;
+    if written {
+        mesh::obj::write_obj_with_uv(&job.output, &mesh, &uv).map_err(|source| Error::Io {
+            path: job.output.clone(),
+            source,
+        })?;
+    }
 
     let mut report = ParamReport {
         init: init_name(job.init).into(),
@@ -356,6 +364,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
         report.mu_rel = Some(result.mu_rel_final);
         report.history = result.history;
     }
+    report.written = written;
     report.input = job.input.display().to_string();
     report.output = job.output.display().to_string();
     report.vertices = mesh.positions.len();
@@ -490,12 +499,15 @@ fn run_atlas(
         }
         .into());
     }
-    mesh::obj::write_obj_with_corner_uv(&job.output, &input, &uv, &cutm.mesh.faces).map_err(
-        |source| Error::Io {
-            path: job.output.clone(),
-            source,
-        },
-    )?;
+    report.written = converged || job.keep_best;
+    if report.written {
+        mesh::obj::write_obj_with_corner_uv(&job.output, &input, &uv, &cutm.mesh.faces).map_err(
+            |source| Error::Io {
+                path: job.output.clone(),
+                source,
+            },
+        )?;
+    }
 
     report.input = job.input.display().to_string();
     report.output = job.output.display().to_string();

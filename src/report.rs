@@ -41,6 +41,9 @@ pub struct ParamReport {
     /// Bytes the kernels read and write per iteration (Vulkan only), for bandwidth estimates.
     pub bytes_per_iteration: Option<u64>,
     pub history: Vec<crate::param::admm::History>,
+    /// Whether the output OBJ was written: always when the solver converged (or none ran),
+    /// otherwise only with `--keep-best`.
+    pub written: bool,
     /// Seams, charts and packing, when the mesh was cut into charts.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub atlas: Option<AtlasReport>,

@@ -45,6 +45,15 @@ fn check_ok(out: &std::process::Output, what: &str) {
     );
 }
 
+/// Success, or a run that stopped at its iteration cap and kept its best map (`--keep-best`).
+fn check_kept(out: &std::process::Output, what: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if out.status.code() == Some(1) && stderr.contains("best flip-free map was written") {
+        return;
+    }
+    check_ok(out, what);
+}
+
 /// Decodes an RGBA8 PNG into (width, height, pixels).
 fn decode(bytes: &[u8]) -> (u32, u32, Vec<[u8; 4]>) {
     let mut reader = png::Decoder::new(Cursor::new(bytes))
@@ -187,9 +196,10 @@ fn render_camel_after_admm() {
         "cpu",
         "--max-iters",
         "200",
+        "--keep-best",
         "-q",
     ]);
-    check_ok(&out, "foldfree param");
+    check_kept(&out, "foldfree param");
     let s = render_via_cli(&dir, &uv, 384, 16);
     assert!(s.foreground > 0.05, "foreground {:.3}", s.foreground);
     assert!(

@@ -131,10 +131,12 @@ fn run_with_pictures(mesh: &str, extra: &[&str]) -> (TempDir, usize) {
         .args(extra)
         .output()
         .expect("run foldfree");
+    // Pictures are written whether or not the run converged within its budget.
+    let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        out.status.success(),
-        "{mesh}: foldfree failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
+        out.status.success()
+            || (out.status.code() == Some(1) && stderr.contains("did not converge")),
+        "{mesh}: foldfree failed:\n{stderr}"
     );
     let report: serde_json::Value =
         serde_json::from_slice(&fs::read(dir.join("report.json")).expect("report written"))
