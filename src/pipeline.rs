@@ -410,7 +410,15 @@ fn run_atlas(
 ) -> Result<ParamOutput> {
     use crate::param::{cut, pack};
     let t_cut = Instant::now();
-    let cutm = cut::cut_to_disks(&input, topo, &job.cut_options, &job.input)?;
+    let mut cutm = cut::cut_to_disks(&input, topo, &job.cut_options, &job.input)?;
+    let mut extra = Vec::new();
+    while extra.len() < job.cut_options.extra_seams {
+        match most_shrunk_vertex(&cutm, &job.input)? {
+            Some((v, ratio)) if ratio > job.cut_options.stretch_limit => extra.push(v),
+            _ => break,
+        }
+        cutm = cut::cut_to_disks_through(&input, topo, &job.cut_options, &job.input, &extra)?;
+    }
     let seconds_cut = t_cut.elapsed().as_secs_f64();
 
     let mut uv = vec![[0.0f64; 2]; cutm.mesh.positions.len()];
@@ -533,6 +541,7 @@ fn run_atlas(
         components: topo.components,
         packing_efficiency: packing.efficiency,
         margin: job.pack.margin,
+        extra_seams: extra.len(),
         seconds_cut,
     });
     report.seconds_load = t_load;
@@ -544,6 +553,60 @@ fn run_atlas(
         uv,
         report,
     })
+}
+
+/// The input vertex around which a conformal (LSCM) map of its chart shrinks area the most,
+/// with that shrink: (3D area share / UV area share), averaged over the vertex's faces by 3D
+/// area. Conformal maps of long protrusions (ears, limbs, tails) shrink them exponentially; a
+/// seam to the worst tip relieves it. `None` when no chart could be mapped.
+fn most_shrunk_vertex(
+    cutm: &crate::param::cut::CutMesh,
+    file: &Path,
+) -> Result<Option<(u32, f64)>> {
+    let mut worst: Option<(u32, f64)> = None;
+    for faces in &cutm.charts {
+        if faces.len() < 2 {
+            continue;
+        }
+        let (sub, global) = cutm.chart_mesh(faces);
+        let sub_topo = Topology::build(&sub, file)?;
+        let Ok(uv) = initial_map(&sub, &sub_topo, InitMethod::Lscm) else {
+            continue;
+        };
+        let frames = mesh::frames::compute(&sub);
+        let area_uv: Vec<f64> = sub
+            .faces
+            .iter()
+            .map(|f| {
+                crate::init::signed_area2(uv[f[0] as usize], uv[f[1] as usize], uv[f[2] as usize])
+                    .abs()
+                    / 2.0
+            })
+            .collect();
+        let (t3, tuv): (f64, f64) = (frames.area.iter().sum(), area_uv.iter().sum());
+        if !(t3 > 0.0 && tuv > 0.0) {
+            continue;
+        }
+        let mut num = vec![0.0f64; sub.positions.len()];
+        let mut den = vec![0.0f64; sub.positions.len()];
+        for (f, tri) in sub.faces.iter().enumerate() {
+            let a3 = frames.area[f] / t3;
+            let r = a3 / (area_uv[f] / tuv).max(1e-300);
+            for &v in tri {
+                num[v as usize] += a3 * r.min(1e12);
+                den[v as usize] += a3;
+            }
+        }
+        for v in 0..sub.positions.len() {
+            if den[v] > 0.0 {
+                let ratio = num[v] / den[v];
+                if worst.map_or(true, |w| ratio > w.1) {
+                    worst = Some((cutm.origin[global[v] as usize], ratio));
+                }
+            }
+        }
+    }
+    Ok(worst)
 }
 
 fn energy_name(e: Energy) -> &'static str {

@@ -68,5 +68,7 @@ pub struct AtlasReport {
     pub packing_efficiency: f64,
     /// Gap between charts and to the border, as a fraction of the square's side.
     pub margin: f64,
+    /// Seams added to relieve stretched tips (`CutOptions::extra_seams`).
+    pub extra_seams: usize,
     pub seconds_cut: f64,
 }

@@ -39,12 +39,20 @@ use crate::mesh::{MeshError, Topology, TriMesh, NO_FACE};
 pub struct CutOptions {
     /// β: how strongly seams prefer curved regions (0 = shortest seams).
     pub curvature_weight: f64,
+    /// At most this many extra seams, each to the vertex whose conformal start map is shrunk
+    /// the most, while that shrink exceeds `stretch_limit`.
+    pub extra_seams: usize,
+    /// Area ratio (chart-normalised 3D area over UV area around a vertex) above which a vertex
+    /// gets an extra seam.
+    pub stretch_limit: f64,
 }
 
 impl Default for CutOptions {
     fn default() -> Self {
         CutOptions {
             curvature_weight: 1.0,
+            extra_seams: 8,
+            stretch_limit: 16.0,
         }
     }
 }
@@ -73,6 +81,20 @@ pub fn cut_to_disks(
     opts: &CutOptions,
     file: &Path,
 ) -> Result<CutMesh, crate::Error> {
+    cut_to_disks_through(mesh, topo, opts, file, &[])
+}
+
+/// [`cut_to_disks`], then a seam from the cut (or the boundary) to each vertex of `extra`, in
+/// order: the shortest path that meets the existing cut only at its start, so every chart stays
+/// a disk. This is how a chart whose map is badly stretched is relieved (Gu, Gortler & Hoppe
+/// 2002 cut to the point of worst stretch); vertices already on the cut are skipped.
+pub fn cut_to_disks_through(
+    mesh: &TriMesh,
+    topo: &Topology,
+    opts: &CutOptions,
+    file: &Path,
+    extra: &[u32],
+) -> Result<CutMesh, crate::Error> {
     require_cuttable(mesh, topo, file)?;
     let weights = edge_weights(mesh, topo, opts.curvature_weight);
     let mut cut = vec![false; topo.edges.len()];
@@ -84,6 +106,9 @@ pub fn cut_to_disks(
         }
         prune(topo, &mut cut);
         cut_closed_spheres(mesh, topo, &weights, &mut cut);
+    }
+    for &target in extra {
+        add_seam_to(topo, &weights, &mut cut, target);
     }
     let seam_edges: Vec<u32> = (0..topo.edges.len() as u32)
         .filter(|&e| cut[e as usize])
@@ -539,6 +564,43 @@ fn cut_closed_spheres(mesh: &TriMesh, topo: &Topology, weights: &[f64], cut: &mu
         for e in path {
             cut[e as usize] = true;
         }
+    }
+}
+
+/// Adds the shortest path from the cut graph ∪ boundary of `target`'s component to `target`.
+fn add_seam_to(topo: &Topology, weights: &[f64], cut: &mut [bool], target: u32) {
+    let mut on_cut = vec![false; topo.n_vertices];
+    for (e, &[_, f1]) in topo.edge_faces.iter().enumerate() {
+        if cut[e] || f1 == NO_FACE {
+            for v in topo.edges[e] {
+                on_cut[v as usize] = true;
+            }
+        }
+    }
+    if target as usize >= topo.n_vertices || on_cut[target as usize] {
+        return;
+    }
+    // Search from the target outwards; the first cut vertex settled is the nearest.
+    let (dist, parent, _) = dijkstra(topo, weights, &[(target, 0)]);
+    let Some(end) = (0..topo.n_vertices as u32)
+        .filter(|&v| on_cut[v as usize] && dist[v as usize].is_finite())
+        .min_by(|&a, &b| {
+            dist[a as usize]
+                .total_cmp(&dist[b as usize])
+                .then(a.cmp(&b))
+        })
+    else {
+        return;
+    };
+    let mut v = end;
+    while v != target {
+        let e = parent[v as usize];
+        if e == u32::MAX {
+            return;
+        }
+        cut[e as usize] = true;
+        let [x, y] = topo.edges[e as usize];
+        v = if x == v { y } else { x };
     }
 }
 
