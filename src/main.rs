@@ -167,6 +167,12 @@ struct ParamArgs {
     /// How strongly seams prefer curved regions (0 = shortest seams).
     #[arg(long, default_value_t = 1.0)]
     seam_curvature: f64,
+    /// At most this many extra seams, each to the tip a conformal map shrinks most.
+    #[arg(long, default_value_t = 8)]
+    extra_seams: usize,
+    /// Extra seams are cut while some vertex's area shrinks more than this factor.
+    #[arg(long, default_value_t = 16.0)]
+    stretch_limit: f64,
     /// Enable the Khronos validation layer (any message fails the run).
     #[arg(long)]
     validation: bool,
@@ -473,6 +479,14 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         )));
     }
     job.cut_options.curvature_weight = args.seam_curvature;
+    job.cut_options.extra_seams = args.extra_seams;
+    if !(args.stretch_limit.is_finite() && args.stretch_limit >= 1.0) {
+        return Err(foldfree::Error::Usage(format!(
+            "--stretch-limit {} must be a finite number >= 1",
+            args.stretch_limit
+        )));
+    }
+    job.cut_options.stretch_limit = args.stretch_limit;
 
     let bar = if args.quiet || solver == SolverChoice::None {
         indicatif::ProgressBar::hidden()
