@@ -445,12 +445,9 @@ impl Recorder {
         }
         let buffers = [cmd];
         let submit = vk::SubmitInfo::default().command_buffers(&buffers);
-        {
-            let queue = self.ctx.queue();
-            // SAFETY: the queue is locked (external synchronization); the command buffer is
-            // executable and the fence unsignalled and unused.
-            unsafe { device.queue_submit(*queue, &[submit], self.fence) }
-                .map_err(|r| map_result("vkQueueSubmit", r))?;
+        if let Err(e) = self.ctx.submit(&submit, self.fence) {
+            self.keep_alive.clear();
+            return Err(e);
         }
         self.state = State::Pending;
         self.wait(timeout)
@@ -461,19 +458,8 @@ impl Recorder {
         if self.state != State::Pending {
             return Ok(());
         }
-        let nanos = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
+        self.ctx.wait_fence(self.fence, timeout, &self.name)?;
         let device = self.ctx.device();
-        // SAFETY: the fence is ours and was submitted with the command buffer.
-        match unsafe { device.wait_for_fences(&[self.fence], true, nanos) } {
-            Ok(()) => {}
-            Err(vk::Result::TIMEOUT) => {
-                return Err(GpuError::Timeout {
-                    what: self.name.clone(),
-                    timeout,
-                })
-            }
-            Err(r) => return Err(map_result("vkWaitForFences", r)),
-        }
         // SAFETY: the fence is signalled and no submission uses it now.
         unsafe { device.reset_fences(&[self.fence]) }
             .map_err(|r| map_result("vkResetFences", r))?;

@@ -125,6 +125,10 @@ pub(crate) struct Shared {
     allocator: Mutex<Option<Allocator>>,
     /// Queue submission needs external synchronization.
     queue: Mutex<vk::Queue>,
+    /// Set once a call returned `VK_ERROR_DEVICE_LOST` (or a test simulated it): every later
+    /// submission fails fast with [`GpuError::DeviceLost`], as the spec requires of a lost
+    /// device, instead of queueing work that can never run.
+    lost: std::sync::atomic::AtomicBool,
     queue_family_index: u32,
     physical_device: vk::PhysicalDevice,
     device_name: String,
@@ -532,6 +536,65 @@ impl Context {
     }
 
     /// The compute queue, locked for submission.
+    /// Whether the device was lost (a call returned `VK_ERROR_DEVICE_LOST`, or
+    /// [`Context::simulate_device_lost`]). A lost context only fails; drop it and make a new one.
+    pub fn is_lost(&self) -> bool {
+        self.shared.lost.load(std::sync::atomic::Ordering::Acquire)
+    }
+
+    /// Makes the context behave as after `VK_ERROR_DEVICE_LOST`: every later submission returns
+    /// [`GpuError::DeviceLost`]. A real loss cannot be provoked on demand, so this is how hosts
+    /// and tests exercise their recovery path; nothing is destroyed, dropping stays safe.
+    pub fn simulate_device_lost(&self) {
+        self.shared
+            .lost
+            .store(true, std::sync::atomic::Ordering::Release);
+    }
+
+    /// Marks the context lost when `e` is a device loss; returns `e`.
+    pub(crate) fn note_error(&self, e: GpuError) -> GpuError {
+        if matches!(e, GpuError::DeviceLost { .. }) {
+            self.simulate_device_lost();
+        }
+        e
+    }
+
+    /// Submits one batch on the (locked) queue, failing fast on a lost device.
+    pub(crate) fn submit(&self, submit: &vk::SubmitInfo<'_>, fence: vk::Fence) -> GpuResult<()> {
+        if self.is_lost() {
+            return Err(GpuError::DeviceLost {
+                what: "vkQueueSubmit",
+            });
+        }
+        let queue = self.queue();
+        // SAFETY: the queue is locked (external synchronization); the caller passes an
+        // executable command buffer and an unsignalled fence that no pending submission uses.
+        unsafe {
+            self.device()
+                .queue_submit(*queue, std::slice::from_ref(submit), fence)
+        }
+        .map_err(|r| self.note_error(super::error::map_result("vkQueueSubmit", r)))
+    }
+
+    /// Waits up to `timeout` for `fence`; a timeout is [`GpuError::Timeout`] naming `what`.
+    pub(crate) fn wait_fence(
+        &self,
+        fence: vk::Fence,
+        timeout: std::time::Duration,
+        what: &str,
+    ) -> GpuResult<()> {
+        let nanos = u64::try_from(timeout.as_nanos()).unwrap_or(u64::MAX);
+        // SAFETY: the fence belongs to this device; waiting has no other requirement.
+        match unsafe { self.device().wait_for_fences(&[fence], true, nanos) } {
+            Ok(()) => Ok(()),
+            Err(vk::Result::TIMEOUT) => Err(GpuError::Timeout {
+                what: what.to_string(),
+                timeout,
+            }),
+            Err(r) => Err(self.note_error(super::error::map_result("vkWaitForFences", r))),
+        }
+    }
+
     pub(crate) fn queue(&self) -> MutexGuard<'_, vk::Queue> {
         self.shared
             .queue
@@ -646,6 +709,7 @@ fn assemble(p: Parts) -> GpuResult<Context> {
         debug_utils,
         allocator: Mutex::new(allocator),
         queue: Mutex::new(queue),
+        lost: std::sync::atomic::AtomicBool::new(false),
         queue_family_index: p.queue_family_index,
         physical_device: p.physical_device,
         device_name,

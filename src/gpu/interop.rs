@@ -10,6 +10,9 @@
 
 use std::sync::Arc;
 
+/// How long an engine-submitted dispatch may take before it is reported as hung.
+const DISPATCH_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(600);
+
 use ash::vk;
 
 use super::buffer::Buffer;
@@ -456,20 +459,13 @@ impl OneShot {
     }
 
     fn submit_and_wait(&mut self) -> GpuResult<()> {
-        let device = self.ctx.device();
         let buffers = [self.cmd];
         let submit = vk::SubmitInfo::default().command_buffers(&buffers);
-        {
-            let queue = self.ctx.queue();
-            // SAFETY: the queue is locked (the host promised not to use it concurrently); the
-            // command buffer is executable and the fence unsignalled and unused.
-            unsafe { device.queue_submit(*queue, &[submit], self.fence) }
-                .map_err(|r| map_result("vkQueueSubmit", r))?;
-        }
+        // The host promised not to use the queue concurrently; the context locks it anyway.
+        self.ctx.submit(&submit, self.fence)?;
         self.pending = true;
-        // SAFETY: our fence, just submitted.
-        unsafe { device.wait_for_fences(&[self.fence], true, u64::MAX) }
-            .map_err(|r| map_result("vkWaitForFences", r))?;
+        self.ctx
+            .wait_fence(self.fence, DISPATCH_TIMEOUT, "interop dispatch")?;
         self.pending = false;
         Ok(())
     }

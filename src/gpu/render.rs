@@ -703,26 +703,10 @@ pub fn render_checker(
 
     let cmds = [cmd];
     let submit = vk::SubmitInfo::default().command_buffers(&cmds);
-    {
-        let queue = ctx.queue();
-        // SAFETY: the queue is locked (external synchronization); the command buffer is
-        // executable; the fence is unsignalled and unused.
-        unsafe { device.queue_submit(*queue, &[submit], obj.fence) }
-            .map_err(|r| map_result("vkQueueSubmit", r))?;
-    }
+    ctx.submit(&submit, obj.fence)?;
     obj.pending = true;
-    let nanos = u64::try_from(RENDER_TIMEOUT.as_nanos()).unwrap_or(u64::MAX);
-    // SAFETY: the fence is ours and was submitted with the command buffer.
-    match unsafe { device.wait_for_fences(&[obj.fence], true, nanos) } {
-        Ok(()) => obj.pending = false,
-        Err(vk::Result::TIMEOUT) => {
-            return Err(GpuError::Timeout {
-                what: "render.checker".to_string(),
-                timeout: RENDER_TIMEOUT,
-            })
-        }
-        Err(r) => return Err(map_result("vkWaitForFences", r)),
-    }
+    ctx.wait_fence(obj.fence, RENDER_TIMEOUT, "render.checker")?;
+    obj.pending = false;
     drop(obj);
     let pixels = readback.read::<u8>()?;
     Ok(pixels)
