@@ -9,7 +9,11 @@
 //!    host vouches for them (see [`crate::gpu::Context::from_host`]) — and wrap the context with
 //!    [`Engine::new`].
 //! 3. [`Engine::parameterize`] the host's positions and faces (same pipeline and defaults as
-//!    `foldfree param --backend vulkan`), then write the UVs into the host's buffer with
+//!    `foldfree param --backend vulkan`) — or, when the mesh already lives in the host's
+//!    vertex and index buffers, [`Engine::parameterize_buffers`] with a [`MeshBuffers`]
+//!    layout (a gather kernel reads them on the device; entry barrier from
+//!    [`MeshBuffers::before`], the host's buffers are only read) — then write the UVs into the
+//!    host's buffer with
 //!    [`Engine::write_uvs`] (the engine submits and waits) or
 //!    [`Engine::record_write_uvs`] (the engine records into the host's command buffer).
 //! 4. Drop the engine (and every [`RecordedUvWrite`]) before destroying the device. The engine
@@ -68,7 +72,7 @@
 
 use std::path::Path;
 
-use crate::gpu::interop::{ForeignDispatch, ForeignRange, ForeignSet, SetEntry};
+use crate::gpu::interop::{ForeignDispatch, ForeignRange, ForeignSet, SetEntry, TargetUse};
 use crate::gpu::{shaders, vk, Buffer, ComputePipeline, ComputePipelineDesc, Context};
 use crate::mesh::{self, TriMesh};
 use crate::param::admm::AdmmOptions;
@@ -151,59 +155,136 @@ struct ScatterPlan {
     push: ScatterPush,
 }
 
+/// A run of `n` elements of `elem_bytes` bytes, element `i` at byte `offset + i * stride` of a
+/// host buffer, resolved against the device: the bound descriptor range (from `offset` rounded
+/// down to `minStorageBufferOffsetAlignment` to the end of the last element) and the kernel's
+/// word indices. Shared by the UV scatter and the mesh gather, whose layouts follow one rule.
+fn plan_span(
+    what: &str,
+    buffer: ForeignBuffer,
+    offset: u64,
+    stride: u64,
+    elem_bytes: u64,
+    n: usize,
+    align: u64,
+    max_range: u64,
+) -> Result<(ForeignRange, u32, u32)> {
+    let bad = |why: String| Error::Usage(format!("{what}: {why}"));
+    if n == 0 {
+        return Err(bad("no elements".into()));
+    }
+    if offset % 4 != 0 || stride % 4 != 0 {
+        return Err(bad(format!(
+            "offset {offset} and stride {stride} must be multiples of 4"
+        )));
+    }
+    if stride < elem_bytes {
+        return Err(bad(format!(
+            "stride {stride} is less than an element ({elem_bytes} bytes)"
+        )));
+    }
+    let end = (n as u64 - 1)
+        .checked_mul(stride)
+        .and_then(|x| x.checked_add(offset))
+        .and_then(|x| x.checked_add(elem_bytes));
+    let Some(end) = end.filter(|&e| e <= buffer.size()) else {
+        return Err(bad(format!(
+            "{n} elements at offset {offset} with stride {stride} do not fit a buffer of {} bytes",
+            buffer.size()
+        )));
+    };
+    let align = align.max(1);
+    let base = offset - offset % align;
+    let range = end - base;
+    if range > max_range {
+        return Err(bad(format!(
+            "the span is {range} bytes, more than the device's maxStorageBufferRange \
+             ({max_range})"
+        )));
+    }
+    let words = |x: u64| u32::try_from(x / 4).map_err(|_| bad("span too large".into()));
+    Ok((
+        ForeignRange {
+            buffer,
+            offset: base,
+            range,
+        },
+        words(offset - base)?,
+        words(stride)?,
+    ))
+}
+
 impl UvTarget {
     /// Checks the layout for `n ≥ 1` UVs and derives the bound range: from `offset` rounded down
     /// to `align` (`minStorageBufferOffsetAlignment`) to the end of the last UV.
     fn plan(&self, n: usize, align: u64, max_range: u64) -> Result<ScatterPlan> {
-        let bad = |why: String| Error::Usage(format!("UV target: {why}"));
-        let uv_bytes = self.format.bytes();
-        if self.offset % 4 != 0 || self.stride % 4 != 0 {
-            return Err(bad(format!(
-                "offset {} and stride {} must be multiples of 4",
-                self.offset, self.stride
-            )));
-        }
-        if self.stride < uv_bytes {
-            return Err(bad(format!(
-                "stride {} is less than a UV ({uv_bytes} bytes)",
-                self.stride
-            )));
-        }
-        let end = (n as u64 - 1)
-            .checked_mul(self.stride)
-            .and_then(|x| x.checked_add(self.offset))
-            .and_then(|x| x.checked_add(uv_bytes));
-        let Some(end) = end.filter(|&e| e <= self.buffer.size()) else {
-            return Err(bad(format!(
-                "{n} UVs at offset {} with stride {} do not fit a buffer of {} bytes",
-                self.offset,
-                self.stride,
-                self.buffer.size()
-            )));
-        };
-        let align = align.max(1);
-        let base = self.offset - self.offset % align;
-        let range = end - base;
-        if range > max_range {
-            return Err(bad(format!(
-                "the written span is {range} bytes, more than the device's maxStorageBufferRange \
-                 ({max_range})"
-            )));
-        }
-        let words = |x: u64| u32::try_from(x / 4).map_err(|_| bad("span too large".into()));
+        let (range, first_word, stride_words) = plan_span(
+            "UV target",
+            self.buffer,
+            self.offset,
+            self.stride,
+            self.format.bytes(),
+            n,
+            align,
+            max_range,
+        )?;
         Ok(ScatterPlan {
-            range: ForeignRange {
-                buffer: self.buffer,
-                offset: base,
-                range,
-            },
+            range,
             push: ScatterPush {
-                n: u32::try_from(n).map_err(|_| bad(format!("{n} vertices")))?,
-                first_word: words(self.offset - base)?,
-                stride_words: words(self.stride)?,
+                n: u32::try_from(n).map_err(|_| Error::Usage(format!("{n} vertices")))?,
+                first_word,
+                stride_words,
             },
         })
     }
+}
+
+/// A mesh that lives in the host's own buffers: vertex `i`'s position is three `f32` (x, y, z)
+/// at byte `position_offset + i * position_stride` of `positions` (e.g. an interleaved vertex
+/// buffer), face `f` is three `u32` vertex indices (counter-clockwise) at byte
+/// `index_offset + 12 f` of `indices`. Offsets and the stride are multiples of 4; both buffers
+/// need `VK_BUFFER_USAGE_STORAGE_BUFFER_BIT` (they are read by a compute kernel, never written).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MeshBuffers {
+    pub positions: ForeignBuffer,
+    pub position_offset: u64,
+    pub position_stride: u64,
+    pub vertex_count: u32,
+    pub indices: ForeignBuffer,
+    pub index_offset: u64,
+    pub face_count: u32,
+    /// The host's earlier accesses to both ranges on this queue (e.g. the transfer that
+    /// uploaded them); [`HostAccess::any`] when unsure.
+    pub before: HostAccess,
+}
+
+/// Push constants of `glsl/embed/gather_words.comp` (same field order).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+struct GatherPush {
+    n: u32,
+    first_word: u32,
+    stride_words: u32,
+    width: u32,
+}
+const _: () = assert!(std::mem::size_of::<GatherPush>() == 16);
+
+/// CPU twin of `glsl/embed/gather_words.comp`: `n` elements of `width` words, element `i`
+/// starting at word `first_word + i * stride_words` of `src`, packed. `None` if `src` is too
+/// short (the kernel's caller guarantees it is not).
+pub fn gather_words(
+    src: &[u32],
+    n: usize,
+    first_word: usize,
+    stride_words: usize,
+    width: usize,
+) -> Option<Vec<u32>> {
+    let mut out = Vec::with_capacity(n * width);
+    for i in 0..n {
+        let s = first_word + i * stride_words;
+        out.extend_from_slice(src.get(s..s + width)?);
+    }
+    Some(out)
 }
 
 /// Keeps what a [`Engine::record_write_uvs`] recording uses alive (the UV source buffer and the
@@ -217,6 +298,7 @@ pub struct RecordedUvWrite {
 pub struct Engine {
     ctx: Context,
     scatter: ComputePipeline,
+    gather: ComputePipeline,
 }
 
 const _: () = {
@@ -245,7 +327,21 @@ impl Engine {
                 std::mem::size_of::<ScatterPush>() as u32,
             ),
         )?;
-        Ok(Engine { ctx, scatter })
+        let spirv = shaders::words(shaders::EMBED_GATHER_WORDS)?;
+        let gather = ComputePipeline::new(
+            &ctx,
+            &ComputePipelineDesc::new(
+                "embed.gather_words",
+                &spirv,
+                2,
+                std::mem::size_of::<GatherPush>() as u32,
+            ),
+        )?;
+        Ok(Engine {
+            ctx,
+            scatter,
+            gather,
+        })
     }
 
     /// The context the engine runs on.
@@ -284,6 +380,121 @@ impl Engine {
         Ok(map.uv)
     }
 
+    /// Reads a mesh out of the host's buffers (see [`MeshBuffers`]): one gather kernel per
+    /// buffer copies the words exactly (positions stay the host's `f32` values, widened to
+    /// f64), submitted on the host's queue after a barrier from `src.before`, then read back.
+    /// The result is not validated; [`Engine::parameterize_buffers`] does that.
+    pub fn read_mesh(&self, src: &MeshBuffers) -> Result<TriMesh> {
+        let align = crate::gpu::interop::min_storage_buffer_offset_alignment(&self.ctx);
+        let max_range = self.ctx.limits().max_storage_buffer_range;
+        let positions = self.gather(
+            "mesh positions",
+            src.positions,
+            src.position_offset,
+            src.position_stride,
+            3,
+            src.vertex_count as usize,
+            src.before,
+            align,
+            max_range,
+        )?;
+        let indices = self.gather(
+            "mesh indices",
+            src.indices,
+            src.index_offset,
+            12,
+            3,
+            src.face_count as usize,
+            src.before,
+            align,
+            max_range,
+        )?;
+        Ok(TriMesh {
+            positions: positions
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]].map(|w| f64::from(f32::from_bits(w))))
+                .collect(),
+            faces: indices
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect(),
+        })
+    }
+
+    /// [`Engine::read_mesh`] then [`Engine::parameterize`]: the UVs of a disk mesh that lives
+    /// in the host's buffers (bad indices or geometry get the same located errors as a file,
+    /// naming [`MEMORY_FILE`]).
+    pub fn parameterize_buffers(
+        &self,
+        src: &MeshBuffers,
+        opts: &EmbedOptions,
+    ) -> Result<Vec<[f64; 2]>> {
+        let mesh = self.read_mesh(src)?;
+        self.parameterize(&mesh.positions, &mesh.faces, opts)
+    }
+
+    /// One gather dispatch: `n` elements of `width` words from a strided host range.
+    #[allow(clippy::too_many_arguments)]
+    fn gather(
+        &self,
+        what: &str,
+        buffer: ForeignBuffer,
+        offset: u64,
+        stride: u64,
+        width: u32,
+        n: usize,
+        before: HostAccess,
+        align: u64,
+        max_range: u64,
+    ) -> Result<Vec<u32>> {
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        let (range, first_word, stride_words) = plan_span(
+            what,
+            buffer,
+            offset,
+            stride,
+            4 * u64::from(width),
+            n,
+            align,
+            max_range,
+        )?;
+        let n32 = u32::try_from(n).map_err(|_| Error::Usage(format!("{what}: {n} elements")))?;
+        let dst = Buffer::with_desc(
+            &self.ctx,
+            &crate::gpu::BufferDesc {
+                name: "embed.gather_dst",
+                size: 4 * u64::from(width) * n as u64,
+                usage: crate::gpu::BufferUsage::Storage,
+                location: crate::gpu::MemoryLocation::GpuToCpu,
+            },
+        )?;
+        let set = ForeignSet::new(
+            &self.gather,
+            "embed.gather_words.set",
+            &[SetEntry::Foreign(range), SetEntry::Owned(&dst)],
+        )?;
+        let push = GatherPush {
+            n: n32,
+            first_word,
+            stride_words,
+            width,
+        };
+        ForeignDispatch {
+            pipeline: &self.gather,
+            set: &set,
+            push: bytemuck::bytes_of(&push),
+            threads: n32,
+            target: range,
+            target_use: TargetUse::Read,
+            before,
+            after: HostAccess::any(),
+        }
+        .submit_and_wait("embed.gather_words")?;
+        Ok(dst.read::<u32>()?)
+    }
+
     /// Uploads `uv` (rounded to f32) and a descriptor set binding the target's span.
     fn prepare(&self, uv: &[[f64; 2]], target: &UvTarget) -> Result<(ScatterPlan, ForeignSet)> {
         let plan = target.plan(
@@ -316,6 +527,7 @@ impl Engine {
             push: bytemuck::bytes_of(&plan.push),
             threads: plan.push.n,
             target: plan.range,
+            target_use: TargetUse::Written,
             before: HostAccess {
                 stage: vk::PipelineStageFlags2::ALL_COMMANDS | vk::PipelineStageFlags2::HOST,
                 access: vk::AccessFlags2::MEMORY_WRITE | vk::AccessFlags2::HOST_WRITE,
@@ -348,6 +560,7 @@ impl Engine {
             push: bytemuck::bytes_of(&plan.push),
             threads: plan.push.n,
             target: plan.range,
+            target_use: TargetUse::Written,
             before,
             after,
         }

@@ -11,7 +11,10 @@ mod host_renderer;
 use std::path::PathBuf;
 use std::process::Command;
 
-use foldfree::embed::{EmbedOptions, Engine, ForeignBuffer, UvFormat, UvTarget, MEMORY_FILE};
+use foldfree::embed::{
+    gather_words, EmbedOptions, Engine, ForeignBuffer, HostAccess, MeshBuffers, UvFormat, UvTarget,
+    MEMORY_FILE,
+};
 use foldfree::gpu::{vk, Context};
 use host_renderer::{Host, Unavailable};
 
@@ -251,4 +254,158 @@ fn a_lost_device_gives_typed_errors_not_panics() {
     }
     host.destroy_buffer(buffer);
     assert_silent(&host, "around the simulated loss");
+}
+
+/// The mesh gather kernel (`glsl/embed/gather_words.comp`) against its CPU twin
+/// (`embed::gather_words`) on random words at several offsets and strides — including offsets
+/// that are not a multiple of the descriptor alignment — and `parameterize_buffers` equal to
+/// `parameterize` of the same (f32) mesh.
+#[test]
+fn mesh_from_host_buffers_matches_the_cpu_twin() {
+    let Some(host) = validated_host() else {
+        return;
+    };
+    let mut state = 0x2545_f491_u64;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 33) as u32
+    };
+    let words: Vec<u32> = (0..4096)
+        .map(|_| ((next() % 2_000_001) as f32 / 1000.0 - 1000.0).to_bits())
+        .collect();
+    let buffer = host
+        .create_buffer(4 * words.len() as u64, vk::BufferUsageFlags::STORAGE_BUFFER)
+        .expect("host buffer");
+    host.write_buffer(&buffer, &words);
+    let grid_positions: Vec<[f64; 3]> = (0..16)
+        .map(|i| {
+            [
+                f64::from(i % 4) * 0.3,
+                f64::from(i / 4) * 0.3,
+                0.01 * f64::from(i),
+            ]
+        })
+        .collect();
+    let mut grid_faces = Vec::new();
+    for j in 0..3u32 {
+        for i in 0..3u32 {
+            let a = 4 * j + i;
+            grid_faces.push([a, a + 1, a + 5]);
+            grid_faces.push([a, a + 5, a + 4]);
+        }
+    }
+    // Interleaved x y z u v (20 bytes) after a 36-byte header; indices after 100 bytes.
+    let mut vb: Vec<f32> = vec![0.0; 9];
+    for p in &grid_positions {
+        vb.extend([p[0] as f32, p[1] as f32, p[2] as f32, 0.0, 0.0]);
+    }
+    let mut ib: Vec<u32> = vec![0; 25];
+    ib.extend(grid_faces.iter().flatten());
+    let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let vbuf = host.create_buffer(4 * vb.len() as u64, usage).expect("vb");
+    let ibuf = host.create_buffer(4 * ib.len() as u64, usage).expect("ib");
+    host.write_buffer(&vbuf, &vb);
+    host.write_buffer(&ibuf, &ib);
+    {
+        // SAFETY: the handles come from `host`, which outlives the engine (dropped in this
+        // block); the device has `required_features()`; this thread does not use the queue
+        // while the engine runs.
+        let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("from_host");
+        let engine = Engine::new(ctx).expect("engine");
+        // SAFETY: live storage buffers of the lent device, destroyed after the engine.
+        let (fb, fv, fi) = unsafe {
+            (
+                ForeignBuffer::new(buffer.raw, buffer.size),
+                ForeignBuffer::new(vbuf.raw, vbuf.size),
+                ForeignBuffer::new(ibuf.raw, ibuf.size),
+            )
+        };
+        for (offset, stride, n) in [
+            (0u64, 12u64, 300u32),
+            (4, 16, 200),
+            (52, 28, 100),
+            (8, 12, 1),
+        ] {
+            let src = MeshBuffers {
+                positions: fb,
+                position_offset: offset,
+                position_stride: stride,
+                vertex_count: n,
+                indices: fb,
+                index_offset: offset + 8,
+                face_count: n / 2,
+                before: HostAccess::any(),
+            };
+            let got = engine.read_mesh(&src).expect("gather");
+            let twin_p = gather_words(
+                &words,
+                n as usize,
+                offset as usize / 4,
+                stride as usize / 4,
+                3,
+            )
+            .expect("twin positions");
+            let twin_i = gather_words(&words, n as usize / 2, offset as usize / 4 + 2, 3, 3)
+                .expect("twin indices");
+            let got_p: Vec<u32> = got
+                .positions
+                .iter()
+                .flatten()
+                .map(|&x| (x as f32).to_bits())
+                .collect();
+            let got_i: Vec<u32> = got.faces.iter().flatten().copied().collect();
+            assert_eq!(
+                got_p, twin_p,
+                "positions at offset {offset} stride {stride}"
+            );
+            assert_eq!(got_i, twin_i, "indices at offset {offset}");
+        }
+        // Past the end of the buffer: refused before any GPU work.
+        let too_far = MeshBuffers {
+            positions: fb,
+            position_offset: 0,
+            position_stride: 16,
+            vertex_count: 1025,
+            indices: fb,
+            index_offset: 0,
+            face_count: 1,
+            before: HostAccess::any(),
+        };
+        assert!(matches!(
+            engine.read_mesh(&too_far),
+            Err(foldfree::Error::Usage(_))
+        ));
+
+        let src = MeshBuffers {
+            positions: fv,
+            position_offset: 36,
+            position_stride: 20,
+            vertex_count: grid_positions.len() as u32,
+            indices: fi,
+            index_offset: 100,
+            face_count: grid_faces.len() as u32,
+            before: HostAccess::any(),
+        };
+        let mesh = engine.read_mesh(&src).expect("read the grid");
+        let rounded: Vec<[f64; 3]> = grid_positions
+            .iter()
+            .map(|p| p.map(|c| f64::from(c as f32)))
+            .collect();
+        assert_eq!(mesh.positions, rounded);
+        assert_eq!(mesh.faces, grid_faces);
+        let opts = EmbedOptions::default();
+        let from_buffers = engine
+            .parameterize_buffers(&src, &opts)
+            .expect("from buffers");
+        let from_slices = engine
+            .parameterize(&rounded, &grid_faces, &opts)
+            .expect("from slices");
+        assert_eq!(from_buffers, from_slices);
+    }
+    host.destroy_buffer(buffer);
+    host.destroy_buffer(vbuf);
+    host.destroy_buffer(ibuf);
+    assert_silent(&host, "while gathering meshes from host buffers");
 }

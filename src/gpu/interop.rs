@@ -262,8 +262,22 @@ pub struct ForeignDispatch<'a> {
     pub push: &'a [u8],
     pub threads: u32,
     pub target: ForeignRange,
+    /// Whether the kernel writes `target` (UV scatter) or only reads it (mesh gather).
+    pub target_use: TargetUse,
     pub before: HostAccess,
     pub after: HostAccess,
+}
+
+/// What a [`ForeignDispatch`] does to its host range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TargetUse {
+    /// The kernel writes the range: entry barrier to storage writes, exit barrier from them.
+    Written,
+    /// The kernel only reads the range (and writes this layer's own buffers): entry barrier
+    /// from the host's writes to storage reads; exit: an execution dependency so the host's
+    /// later writes wait for the reads, and this layer's storage writes made visible to host
+    /// reads and to later transfers (read-back).
+    Read,
 }
 
 impl ForeignDispatch<'_> {
@@ -302,11 +316,21 @@ impl ForeignDispatch<'_> {
         let ctx = self.pipeline.context();
         let device = ctx.device();
         let t = self.target;
+        let (use_access, exit_src_access) = match self.target_use {
+            TargetUse::Written => (
+                vk::AccessFlags2::SHADER_STORAGE_WRITE,
+                vk::AccessFlags2::SHADER_STORAGE_WRITE,
+            ),
+            TargetUse::Read => (
+                vk::AccessFlags2::SHADER_STORAGE_READ,
+                vk::AccessFlags2::NONE,
+            ),
+        };
         let entry_buffer = [vk::BufferMemoryBarrier2::default()
             .src_stage_mask(self.before.stage)
             .src_access_mask(self.before.access)
             .dst_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
-            .dst_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
+            .dst_access_mask(use_access)
             .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
             .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
             .buffer(t.buffer.raw)
@@ -356,7 +380,7 @@ impl ForeignDispatch<'_> {
         }
         let exit_buffer = [vk::BufferMemoryBarrier2::default()
             .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
-            .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
+            .src_access_mask(exit_src_access)
             .dst_stage_mask(self.after.stage)
             .dst_access_mask(self.after.access)
             .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
@@ -364,7 +388,20 @@ impl ForeignDispatch<'_> {
             .buffer(t.buffer.raw)
             .offset(t.offset)
             .size(t.range)];
-        let exit = vk::DependencyInfo::default().buffer_memory_barriers(&exit_buffer);
+        // The layer's own outputs of a gather, read back by the host or copied to staging.
+        let exit_global = [vk::MemoryBarrier2::default()
+            .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
+            .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
+            .dst_stage_mask(vk::PipelineStageFlags2::ALL_TRANSFER | vk::PipelineStageFlags2::HOST)
+            .dst_access_mask(vk::AccessFlags2::TRANSFER_READ | vk::AccessFlags2::HOST_READ)];
+        let exit = match self.target_use {
+            TargetUse::Written => {
+                vk::DependencyInfo::default().buffer_memory_barriers(&exit_buffer)
+            }
+            TargetUse::Read => vk::DependencyInfo::default()
+                .memory_barriers(&exit_global)
+                .buffer_memory_barriers(&exit_buffer),
+        };
         // SAFETY: as for the entry barrier.
         unsafe { ctx.sync2().cmd_pipeline_barrier2(cmd, &exit) };
     }
