@@ -219,6 +219,8 @@ impl Host {
             queue_family_index: self.queue_family_index,
             queue: self.queue,
             debug_utils: self.validation,
+            // The engine makes its own allocator; a host with one passes it here.
+            allocator: None,
         }
     }
 

@@ -103,6 +103,7 @@ pub struct DeviceLimits {
 }
 
 /// A host's Vulkan objects, lent to [`Context::from_host`].
+#[derive(Clone)]
 pub struct HostDesc {
     /// The loader the host's instance came from.
     pub entry: ash::Entry,
@@ -114,6 +115,23 @@ pub struct HostDesc {
     pub queue: vk::Queue,
     /// Whether the host enabled `VK_EXT_debug_utils` on its instance (for object names).
     pub debug_utils: bool,
+    /// The host's own gpu-allocator (made for this device), to allocate the engine's buffers
+    /// from the host's heaps and budget; `None` makes a private one. The engine locks it for
+    /// each allocation and free, and frees everything it allocated before its last `Context`
+    /// clone is gone; it never drops the host's allocator.
+    pub allocator: Option<HostAllocator>,
+}
+
+/// A gpu-allocator shared with the host ([`HostDesc::allocator`]).
+pub type HostAllocator = Arc<Mutex<Allocator>>;
+
+/// Where the context's allocator lives.
+enum AllocatorSlot {
+    /// Ours: dropped (and checked for leaks) before the device is destroyed. `None` only
+    /// during teardown.
+    Own(Mutex<Option<Allocator>>),
+    /// The host's: only locked.
+    Host(HostAllocator),
 }
 
 /// Shared state behind every [`Context`] clone and every GPU object.
@@ -121,8 +139,7 @@ pub(crate) struct Shared {
     pub(crate) device: ash::Device,
     pub(crate) sync2: ash::khr::synchronization2::Device,
     debug_utils: Option<ash::ext::debug_utils::Device>,
-    /// `None` only during teardown (it must be dropped before the device).
-    allocator: Mutex<Option<Allocator>>,
+    allocator: AllocatorSlot,
     /// Queue submission needs external synchronization.
     queue: Mutex<vk::Queue>,
     /// Set once a call returned `VK_ERROR_DEVICE_LOST` (or a test simulated it): every later
@@ -160,11 +177,10 @@ impl Drop for Shared {
                     .note(format!("[foldfree] vkDeviceWaitIdle at teardown: {e}"));
             }
         }
-        let allocator = self
-            .allocator
-            .get_mut()
-            .unwrap_or_else(PoisonError::into_inner)
-            .take();
+        let allocator = match &mut self.allocator {
+            AllocatorSlot::Own(a) => a.get_mut().unwrap_or_else(PoisonError::into_inner).take(),
+            AllocatorSlot::Host(_) => None,
+        };
         if let Some(allocator) = allocator {
             let report = allocator.generate_report();
             if !report.allocations.is_empty() {
@@ -411,6 +427,7 @@ impl Context {
             validation,
             sync_validation,
             start,
+            host_allocator: None,
         };
         assemble(parts)
     }
@@ -438,6 +455,7 @@ impl Context {
             validation: false,
             sync_validation: false,
             start,
+            host_allocator: desc.allocator,
         };
         assemble(parts)
     }
@@ -607,14 +625,15 @@ impl Context {
         &self,
         f: impl FnOnce(&mut Allocator) -> GpuResult<T>,
     ) -> GpuResult<T> {
-        let mut guard = self
-            .shared
-            .allocator
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner);
-        match guard.as_mut() {
-            Some(allocator) => f(allocator),
-            None => Err(GpuError::Invalid("allocator used during teardown".into())),
+        match &self.shared.allocator {
+            AllocatorSlot::Own(a) => {
+                let mut guard = a.lock().unwrap_or_else(PoisonError::into_inner);
+                match guard.as_mut() {
+                    Some(allocator) => f(allocator),
+                    None => Err(GpuError::Invalid("allocator used during teardown".into())),
+                }
+            }
+            AllocatorSlot::Host(a) => f(&mut a.lock().unwrap_or_else(PoisonError::into_inner)),
         }
     }
 
@@ -650,6 +669,7 @@ struct Parts {
     validation: bool,
     sync_validation: bool,
     start: Instant,
+    host_allocator: Option<HostAllocator>,
 }
 
 /// Builds the shared state. From the first line on, `Shared`'s `Drop` owns the cleanup, so no
@@ -688,26 +708,34 @@ fn assemble(p: Parts) -> GpuResult<Context> {
     let debug_utils = p
         .debug_utils
         .then(|| ash::ext::debug_utils::Device::new(&p.instance, &p.device));
-    let mut debug_settings = gpu_allocator::AllocatorDebugSettings::default();
-    // We report leaks ourselves, into the message log where tests see them.
-    debug_settings.log_leaks_on_shutdown = false;
-    let allocator_result = Allocator::new(&AllocatorCreateDesc {
-        instance: p.instance.clone(),
-        device: p.device.clone(),
-        physical_device: p.physical_device,
-        debug_settings,
-        buffer_device_address: false,
-        allocation_sizes: gpu_allocator::AllocationSizes::default(),
-    });
-    let (allocator, allocator_error) = match allocator_result {
-        Ok(a) => (Some(a), None),
-        Err(e) => (None, Some(map_allocation("allocator", e))),
+    let (allocator, allocator_error) = match p.host_allocator {
+        Some(a) => (AllocatorSlot::Host(a), None),
+        None => {
+            let mut debug_settings = gpu_allocator::AllocatorDebugSettings::default();
+            // We report leaks ourselves, into the message log where tests see them.
+            debug_settings.log_leaks_on_shutdown = false;
+            let allocator_result = Allocator::new(&AllocatorCreateDesc {
+                instance: p.instance.clone(),
+                device: p.device.clone(),
+                physical_device: p.physical_device,
+                debug_settings,
+                buffer_device_address: false,
+                allocation_sizes: gpu_allocator::AllocationSizes::default(),
+            });
+            match allocator_result {
+                Ok(a) => (AllocatorSlot::Own(Mutex::new(Some(a))), None),
+                Err(e) => (
+                    AllocatorSlot::Own(Mutex::new(None)),
+                    Some(map_allocation("allocator", e)),
+                ),
+            }
+        }
     };
     let shared = Shared {
         device: p.device,
         sync2,
         debug_utils,
-        allocator: Mutex::new(allocator),
+        allocator,
         queue: Mutex::new(queue),
         lost: std::sync::atomic::AtomicBool::new(false),
         queue_family_index: p.queue_family_index,
@@ -932,16 +960,55 @@ mod tests {
             queue_family_index: owner.queue_family_index(),
             queue: *owner.queue(),
             debug_utils: true,
+            allocator: None,
         };
         // SAFETY: the handles come from `owner`, which outlives `borrowed`, was created with
         // `required_features()`, and this single-threaded test never submits from both at once.
-        let borrowed = unsafe { Context::from_host(host) }.expect("from_host");
+        let borrowed = unsafe { Context::from_host(host.clone()) }.expect("from_host");
         assert_eq!(borrowed.device_name(), owner.device_name());
         let data: Vec<u32> = (0..1000).collect();
         let b = super::super::Buffer::from_slice(&borrowed, "host.data", &data).expect("buffer");
         assert_eq!(b.download_staged::<u32>().expect("read"), data);
         drop(b);
         drop(borrowed);
+
+        // With the host's own allocator: our buffers show up in its report while alive, are
+        // gone from it when dropped, and the allocator outlives the context.
+        let host_allocator: HostAllocator = Arc::new(Mutex::new(
+            Allocator::new(&AllocatorCreateDesc {
+                instance: host.instance.clone(),
+                device: host.device.clone(),
+                physical_device: host.physical_device,
+                debug_settings: Default::default(),
+                buffer_device_address: false,
+                allocation_sizes: Default::default(),
+            })
+            .expect("host allocator"),
+        ));
+        let names = |a: &HostAllocator| -> Vec<String> {
+            a.lock()
+                .expect("lock")
+                .generate_report()
+                .allocations
+                .iter()
+                .map(|x| x.name.clone())
+                .collect()
+        };
+        let with_alloc = HostDesc {
+            allocator: Some(host_allocator.clone()),
+            ..host
+        };
+        // SAFETY: as above; the allocator was made for this device.
+        let shared_alloc = unsafe { Context::from_host(with_alloc) }.expect("from_host");
+        let b = super::super::Buffer::from_slice(&shared_alloc, "host.alloc", &data)
+            .expect("buffer in the host's allocator");
+        assert!(names(&host_allocator).contains(&"host.alloc".to_string()));
+        assert_eq!(b.download_staged::<u32>().expect("read"), data);
+        drop(b);
+        assert!(!names(&host_allocator).contains(&"host.alloc".to_string()));
+        drop(shared_alloc);
+        assert_eq!(Arc::strong_count(&host_allocator), 1);
+        drop(host_allocator);
         let c = super::super::Buffer::from_slice(&owner, "owner.data", &data).expect("buffer");
         assert_eq!(c.download_staged::<u32>().expect("read"), data);
         drop(c);

@@ -34,8 +34,8 @@ pub mod shaders;
 pub use buffer::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
 pub use command::{grid_1d, Access, Recorder};
 pub use context::{
-    required_features, Context, ContextDesc, DeviceLimits, HostDesc, RequiredFeatures, API_VERSION,
-    DEVICE_ENV, SYNC_VALIDATION_ENV,
+    required_features, Context, ContextDesc, DeviceLimits, HostAllocator, HostDesc,
+    RequiredFeatures, API_VERSION, DEVICE_ENV, SYNC_VALIDATION_ENV,
 };
 pub use debug::MessageLog;
 pub use error::{map_result, GpuError, GpuResult, INSTALL_HINT};
@@ -45,3 +45,5 @@ pub use render::{render_checker, RenderDesc, BACKGROUND};
 
 /// Raw Vulkan types, for hosts that bring their own device ([`Context::from_host`]).
 pub use ash::vk;
+/// The allocator crate, re-exported so a host names the same version as [`HostAllocator`].
+pub use gpu_allocator;
