@@ -125,7 +125,9 @@ pub struct HostDesc {
 /// A gpu-allocator shared with the host ([`HostDesc::allocator`]).
 pub type HostAllocator = Arc<Mutex<Allocator>>;
 
-/// Where the context's allocator lives.
+/// Where the context's allocator lives. One per context, so the size difference between the
+/// variants costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 enum AllocatorSlot {
     /// Ours: dropped (and checked for leaks) before the device is destroyed. `None` only
     /// during teardown.
