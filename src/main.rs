@@ -161,6 +161,10 @@ struct ParamArgs {
     /// several holes or components), `none` refuses them, `always` also packs a disk.
     #[arg(long, value_enum, default_value = "auto")]
     cut: CutArg,
+    /// Refuse meshes with more faces than this (and files far larger than such a mesh needs)
+    /// before any heavy work; 0 = no limit.
+    #[arg(long, default_value_t = 20_000_000)]
+    max_faces: usize,
     /// Gap between packed charts and to the border, as a fraction of the unit square's side.
     #[arg(long, default_value_t = 0.005)]
     margin: f64,
@@ -460,6 +464,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     job.profile = args.profile;
     job.admm = admm;
     job.keep_best = args.keep_best;
+    job.validate.max_faces = (args.max_faces > 0).then_some(args.max_faces);
     job.cut = match args.cut {
         CutArg::Auto => pipeline::CutMode::Auto,
         CutArg::None => pipeline::CutMode::Never,

@@ -648,3 +648,41 @@ fn tet_mesh_input_is_refused_with_a_reason() {
     assert!(!dir.join("out.obj").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--max-faces` refuses a mesh over the limit with exit 2 and a one-line error, writing
+/// nothing; 0 lifts the limit.
+#[test]
+fn face_limit_is_enforced() {
+    let dir = TempDir::new("max_faces");
+    let out = dir.join("out.obj");
+    let run = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("param")
+        .arg(data("camel_open"))
+        .arg("-o")
+        .arg(&out)
+        .args(["--max-faces", "1000"])
+        .output()
+        .expect("run foldfree");
+    assert_eq!(run.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        stderr.contains("3576 faces, more than the limit of 1000"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(!out.exists());
+    let run = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("param")
+        .arg(data("two_triangles"))
+        .arg("-o")
+        .arg(&out)
+        .args(["--max-faces", "0", "-q"])
+        .output()
+        .expect("run foldfree");
+    assert_eq!(
+        run.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+}

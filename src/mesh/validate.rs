@@ -54,6 +54,25 @@ pub fn load(
     path: &Path,
     opts: &ValidateOptions,
 ) -> Result<(TriMesh, Topology, ValidationReport), MeshError> {
+    if let Some(max) = opts.max_faces {
+        // Refuse before reading: a file far larger than any OBJ of `max` faces would be would
+        // otherwise be read whole into memory first. A face with its share of vertices takes
+        // ~50 bytes of OBJ text; 256 per face leaves room for comments, normals and texture
+        // coordinates.
+        let limit = (max as u64).saturating_mul(256).max(1 << 20);
+        if let Ok(meta) = std::fs::metadata(path) {
+            if meta.len() > limit {
+                return Err(MeshError::TooLarge {
+                    file: path.to_path_buf(),
+                    what: format!(
+                        "the file has {} bytes, more than an OBJ of at most {max} faces needs \
+                         ({limit} bytes); raise the face limit to read it",
+                        meta.len()
+                    ),
+                });
+            }
+        }
+    }
     let mesh = obj::read_obj(path)?;
     let (report, topo) = validate_with_topology(&mesh, path, opts)?;
     Ok((mesh, topo, report))
