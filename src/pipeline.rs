@@ -29,6 +29,8 @@ pub enum SolverChoice {
     None,
     /// ADMM on the chosen backend.
     Admm,
+    /// The global proxy/Newton solver ([`crate::param::global`]) on the CPU.
+    Global,
 }
 
 /// Where ADMM runs.
@@ -149,6 +151,8 @@ pub struct MapOutput {
     pub init_flips: usize,
     /// The ADMM run, when the solver ran.
     pub admm: Option<admm::AdmmResult>,
+    /// The global solver's run, when it ran.
+    pub global: Option<crate::param::global::GlobalResult>,
     /// Per-kernel device times (Vulkan with `profile`).
     pub kernel_times: Option<admm::vulkan::KernelTimes>,
     /// Bytes the kernels move per iteration (Vulkan).
@@ -184,6 +188,7 @@ pub fn compute_map(
         uv: Vec::new(),
         init_flips,
         admm: None,
+        global: None,
         kernel_times: None,
         bytes_per_iteration: None,
         seconds_init,
@@ -242,6 +247,21 @@ pub fn compute_map(
         };
         uv.clone_from(&result.uv);
         out.admm = Some(result);
+    } else if solver == SolverChoice::Global {
+        use crate::param::global::{self, GlobalOptions};
+        // A folded start (LSCM can fold) is replaced by uniform Tutte: the solver never
+        // crosses det = 0, so it cannot unfold.
+        if init_flips > 0 {
+            uv = initial_map(mesh, topo, InitMethod::Tutte(TutteWeights::Uniform))?;
+            normalize_area(mesh, &mut uv, area_3d);
+        }
+        let gopts = GlobalOptions {
+            stop: opts.stop.clone(),
+            ..GlobalOptions::for_energy(opts.energy)
+        };
+        let result = global::solve(mesh, &frames, &uv, &gopts, &mut |_| {})?;
+        uv.clone_from(&result.uv);
+        out.global = Some(result);
     }
     out.seconds_solve = t2.elapsed().as_secs_f64();
     let flips = crate::init::count_flips(&mesh.faces, &uv);
@@ -328,6 +348,19 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
         report.converged = Some(result.converged);
         report.mu_rel = Some(result.mu_rel_final);
         report.history = result.history;
+    }
+    if let Some(result) = map.global {
+        report.solver = "global".into();
+        report.energy = Some(
+            match job.admm.energy {
+                Energy::Mips => "mips",
+                Energy::SymmetricDirichlet => "sd",
+            }
+            .into(),
+        );
+        report.iterations = result.iterations;
+        report.converged = Some(result.stop == crate::param::global::StopReason::GradientTolerance);
+        report.global = Some(result);
     }
     report.input = job.input.display().to_string();
     report.output = job.output.display().to_string();

@@ -41,4 +41,8 @@ pub struct ParamReport {
     /// Bytes the kernels read and write per iteration (Vulkan only), for bandwidth estimates.
     pub bytes_per_iteration: Option<u64>,
     pub history: Vec<crate::param::admm::History>,
+    /// The global solver's stop reason, per-phase totals and per-iteration history
+    /// (`--solver global` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub global: Option<crate::param::global::GlobalResult>,
 }

@@ -3,6 +3,7 @@
 
 pub mod admm;
 pub mod energy;
+pub mod global;
 pub mod recover;
 
 pub use energy::Energy;
