@@ -16,7 +16,7 @@ use crate::mesh::{FaceFrames, TriMesh};
 /// `g_k` (k = 0..3) of one face: `A = [u; v]·G`, `G` the 3x2 matrix with rows `g_k`.
 pub type FaceGradient = [[f64; 2]; 3];
 
-/// Gradient operators of every face, from the local frames. `None` for a degenerate face
+/// Gradient operators of every face, from the local frames. A degenerate face is an error
 /// (validation rejects those before a solver runs; this only avoids NaNs).
 pub fn face_gradients(frames: &FaceFrames) -> Result<Vec<FaceGradient>, SolveError> {
     frames

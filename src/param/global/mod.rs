@@ -208,6 +208,42 @@ impl Problem<'_> {
     }
 }
 
+/// The solver's objective at `uv` (area-weighted mean energy, +∞ when a face is flipped) and
+/// its gradient over the interleaved UVs `[u0, v0, u1, …]`: what [`solve`] minimises, for
+/// checks and for callers that want to score a map the way the solver does.
+pub fn objective_and_gradient(
+    mesh: &TriMesh,
+    frames: &FaceFrames,
+    energy: Energy,
+    uv: &[[f64; 2]],
+) -> Result<(f64, Vec<f64>), SolveError> {
+    let total: f64 = frames.area.iter().sum();
+    if uv.len() != mesh.positions.len() || !(total > 0.0) {
+        return Err(SolveError::InvalidInput {
+            what: format!(
+                "{} UVs for {} vertices (total area {total})",
+                uv.len(),
+                mesh.positions.len()
+            ),
+        });
+    }
+    let problem = Problem {
+        energy,
+        faces: &mesh.faces,
+        rest: face_gradients(frames)?,
+        weight: frames.area.iter().map(|a| a / total).collect(),
+        grad_scale: total.sqrt(),
+    };
+    let x: Vec<f64> = uv.iter().flat_map(|p| [p[0], p[1]]).collect();
+    let e = problem.objective(&problem.rest, &x);
+    let g = if e.is_finite() {
+        problem.gradient(&problem.rest, &x)
+    } else {
+        vec![f64::NAN; x.len()]
+    };
+    Ok((e, g))
+}
+
 /// Relative diagonal shift of every system (see [`Pattern::fill`]).
 const REL_SHIFT: f64 = 1e-9;
 
@@ -447,6 +483,10 @@ pub fn solve(
     let energy = problem.objective(&problem.rest, &x);
     let g = problem.gradient(&problem.rest, &x);
     let grad_norm = dot(&g, &g).sqrt() * problem.grad_scale;
+    if stop == StopReason::Stalled && grad_norm <= opts.grad_tol {
+        // Stalled at rounding level after the last step already met the tolerance.
+        stop = StopReason::GradientTolerance;
+    }
     let mut uv: Vec<[f64; 2]> = x.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     if opts.energy == Energy::Mips {
         // MIPS has no scale: report the map at the 3D area, like the start map.
