@@ -58,9 +58,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let frames = mesh::frames::compute(&m);
     let area: f64 = frames.area.iter().sum();
     let t = std::time::Instant::now();
-    let mut uv = initial_map(&m, &topo, InitMethod::Lscm)?;
-    if !lscm || foldfree::init::count_flips(&m.faces, &uv) > 0 {
-        uv = initial_map(&m, &topo, InitMethod::Tutte(TutteWeights::Uniform))?;
+    let tutte = InitMethod::Tutte(TutteWeights::Uniform);
+    let mut uv = initial_map(&m, &topo, if lscm { InitMethod::Lscm } else { tutte })?;
+    if foldfree::init::count_flips(&m.faces, &uv) > 0 {
+        // The solver never crosses det = 0: a folded LSCM start is replaced by Tutte.
+        uv = initial_map(&m, &topo, tutte)?;
     }
     normalize_area(&m, &mut uv, area);
     let t_init = t.elapsed().as_secs_f64();
@@ -86,7 +88,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let me = foldfree::metrics::evaluate(&m.positions, &m.faces, &r.uv, &topo.boundary_loops);
     println!(
         "{path} {energy:?}: stop {:?} after {} its, init {t_init:.2} s, solve {solve:.2} s \
-         (proxy {} its {:.2} s, newton {} its ({} exact) {:.2} s); E {:.6} |g| {:.2e}; \
+         (proxy {} its {:.2} s, newton {} its ({} exact, {} failed attempts) {:.2} s); E {:.6} |g| {:.2e}; \
          metrics: flips {} SD {:.5} mean δcon {:.5} MIPS {:.5}",
         r.stop,
         r.iterations,
@@ -94,6 +96,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         r.totals.proxy_seconds,
         r.totals.newton_iterations,
         r.totals.exact_newton_iterations,
+        r.totals.exact_newton_failures,
         r.totals.newton_seconds,
         r.energy,
         r.grad_norm,

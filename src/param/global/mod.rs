@@ -146,6 +146,8 @@ pub struct PhaseTotals {
     pub newton_seconds: f64,
     /// Of the Newton iterations, those that used the exact Hessian.
     pub exact_newton_iterations: usize,
+    /// Exact-Hessian attempts that found negative curvature (their CG runs are wasted).
+    pub exact_newton_failures: usize,
 }
 
 /// What [`solve`] returns.
@@ -349,7 +351,9 @@ pub fn solve(
         // Projected Newton converges only linearly where faces are non-convex (their clamped
         // modes); once full steps are accepted the exact Hessian is tried: near a minimum the
         // assembled one is positive definite, and CG reports when it is not.
-        let mut used = if phase == Phase::Newton && try_exact && opts.exact_newton && wait == 0 {
+        let allow_exact = wait == 0;
+        wait = wait.saturating_sub(1);
+        let mut used = if phase == Phase::Newton && try_exact && opts.exact_newton && allow_exact {
             Phase::ExactNewton
         } else {
             phase
@@ -378,6 +382,7 @@ pub fn solve(
             }
             if !(slope < 0.0) {
                 // A failed attempt costs a CG run: back off exponentially before the next.
+                totals.exact_newton_failures += 1;
                 used = Phase::Newton;
                 backoff = (2 * backoff).max(1);
                 wait = backoff;
@@ -447,7 +452,6 @@ pub fn solve(
             }
         }
         try_exact = phase == Phase::Newton && acc.step == 1.0;
-        wait = wait.saturating_sub(1);
         let rec = GlobalIteration {
             iteration: it + 1,
             phase: used,
