@@ -3,7 +3,12 @@
 //! BENCHMARKS.md section of `--solver global`).
 //!
 //! `cargo run --release --example global_solve -- MESH.obj [sd|mips] [--pre jacobi|ic0|amg]
-//!  [--cap X|none] [--no-exact] [--cg-proxy T] [--cg-newton T] [--max-iters N] [--lscm] [-q]`
+//!  [--cap X|none] [--no-exact] [--cg-proxy T] [--cg-newton T] [--max-iters N] [--lscm] [-q]
+//!  [--ttq TARGET]`
+//!
+//! `--ttq TARGET` (time to quality) also reruns the (deterministic) solver with an iteration
+//! cap of 1, 2, … until the `metrics::evaluate` score (SD for sd, mean δcon for mips) is at
+//! most TARGET, and prints that run's iterations and solve time.
 
 use foldfree::init::tutte::TutteWeights;
 use foldfree::linalg::cg::Preconditioner;
@@ -25,6 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut opts = GlobalOptions::for_energy(energy);
     let mut lscm = false;
     let mut quiet = false;
+    let mut ttq: Option<f64> = None;
     let mut it = args.iter().skip(1);
     while let Some(a) = it.next() {
         let mut val = || it.next().ok_or(format!("{a} needs a value"));
@@ -47,6 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--max-iters" => opts.max_iters = val()?.parse()?,
             "--lscm" => lscm = true,
             "-q" => quiet = true,
+            "--ttq" => ttq = Some(val()?.parse()?),
             "sd" | "mips" => {}
             o => return Err(format!("unknown option {o}").into()),
         }
@@ -105,5 +112,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         me.delta_con_mean,
         me.mips_energy
     );
+    if let Some(target) = ttq {
+        let score = |uv: &[[f64; 2]]| {
+            let me = foldfree::metrics::evaluate(&m.positions, &m.faces, uv, &topo.boundary_loops);
+            match energy {
+                Energy::SymmetricDirichlet => me.sd_energy,
+                Energy::Mips => me.delta_con_mean,
+            }
+        };
+        for k in 1..=opts.max_iters {
+            let o = GlobalOptions {
+                max_iters: k,
+                ..opts.clone()
+            };
+            let t = std::time::Instant::now();
+            let r = global::solve(&m, &frames, &uv, &o, &mut |_| {})?;
+            let secs = t.elapsed().as_secs_f64();
+            let s = score(&r.uv);
+            if s <= target || r.iterations < k {
+                println!(
+                    "time to quality {target}: {} its, {secs:.2} s solve, score {s:.5}{}",
+                    r.iterations,
+                    if s <= target { "" } else { " (NOT reached)" }
+                );
+                break;
+            }
+        }
+    }
     Ok(())
 }

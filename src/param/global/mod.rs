@@ -220,7 +220,7 @@ pub fn objective_and_gradient(
     uv: &[[f64; 2]],
 ) -> Result<(f64, Vec<f64>), SolveError> {
     let total: f64 = frames.area.iter().sum();
-    if uv.len() != mesh.positions.len() || !(total > 0.0) {
+    if uv.len() != mesh.positions.len() || total.is_nan() || total <= 0.0 {
         return Err(SolveError::InvalidInput {
             what: format!(
                 "{} UVs for {} vertices (total area {total})",
@@ -252,11 +252,19 @@ const REL_SHIFT: f64 = 1e-9;
 /// CG tolerance of a Newton solve per unit of scale-free gradient norm.
 const FORCING: f64 = 0.01;
 
+/// Longest wait (iterations) between exact-Hessian attempts.
+const MAX_BACKOFF: usize = 4;
+
 /// Progressive references end once fewer than one face in this many is capped.
 const PROGRESSIVE_MIN_SHARE: usize = 1000;
 
 /// Objective decreases below this relative size count as no progress.
 const STALL: f64 = 1e-13;
+
+/// Whether a directional derivative is a (finite) descent slope; NaN is not.
+fn descends(slope: f64) -> bool {
+    slope < 0.0
+}
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.par_iter().zip(b.par_iter()).map(|(x, y)| x * y).sum()
@@ -380,11 +388,11 @@ pub fn solve(
                 Err(SolveError::Failed { .. }) => {}
                 Err(e) => return Err(e),
             }
-            if !(slope < 0.0) {
+            if !descends(slope) {
                 // A failed attempt costs a CG run: back off exponentially before the next.
                 totals.exact_newton_failures += 1;
                 used = Phase::Newton;
-                backoff = (2 * backoff).max(1);
+                backoff = (2 * backoff).clamp(1, MAX_BACKOFF);
                 wait = backoff;
             }
         }
@@ -403,7 +411,7 @@ pub fn solve(
             slope = s;
             cg_iterations += c;
         }
-        if used == Phase::Newton && !(slope < 0.0) {
+        if used == Phase::Newton && !descends(slope) {
             // An inexact or indefinite Newton solve: the proxy direction always descends.
             let (s, c) = direction(
                 &problem,

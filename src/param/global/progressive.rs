@@ -35,7 +35,7 @@ pub fn capped_gradient(
         return (*g, false);
     }
     let [_, _, s1, s2, cv, sv] = svd2(a);
-    if !(s2 > 0.0) {
+    if s2.is_nan() || s2 <= 0.0 {
         return (*g, false);
     }
     // Largest β with E(σ^β) ≤ cap; E(σ^0) = E(1, 1) = the minimum < cap.
