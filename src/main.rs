@@ -384,6 +384,22 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         SolverArg::Admm => SolverChoice::Admm,
         SolverArg::Global => SolverChoice::Global,
     };
+    // The global solver runs on the CPU with its own documented stopping rule.
+    let admm_only = args.mu.is_some()
+        || args.max_iters.is_some()
+        || args.resync.is_some()
+        || args.tol_primal.is_some()
+        || args.tol_dual.is_some()
+        || args.tol_energy.is_some()
+        || args.newton_iters.is_some()
+        || matches!(args.backend, BackendArg::Vulkan);
+    if solver == SolverChoice::Global && admm_only {
+        return Err(foldfree::Error::Usage(
+            "--solver global runs on the CPU with its own stopping rule: --backend vulkan, \
+             --mu, --max-iters, --resync, --tol-* and --newton-iters apply to ADMM only"
+                .into(),
+        ));
+    }
     let init = match args.init {
         Some(InitArg::Tutte) => InitMethod::Tutte(TutteWeights::Uniform),
         Some(InitArg::TutteMeanValue) => InitMethod::Tutte(TutteWeights::MeanValue),

@@ -269,3 +269,21 @@ fn cli_solver_global_writes_a_flip_free_map_and_its_report() {
     assert!(!r["global"]["history"].as_array().unwrap().is_empty());
     assert!(out.exists());
 }
+
+#[test]
+fn cli_solver_global_refuses_admm_only_flags() {
+    let tmp = TempDir::new("cli_solver_global_flags");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/square_grid_10x10.obj");
+    for extra in [&["--max-iters", "5"][..], &["--backend", "vulkan"][..]] {
+        let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+            .args(["param", "--solver", "global", "-q", "-o"])
+            .arg(tmp.join("x.obj"))
+            .args(extra)
+            .arg(&input)
+            .output()
+            .expect("run foldfree");
+        assert_eq!(out.status.code(), Some(2), "{extra:?}");
+        assert!(String::from_utf8_lossy(&out.stderr).contains("ADMM only"));
+        assert!(!tmp.join("x.obj").exists());
+    }
+}
