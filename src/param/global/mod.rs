@@ -388,7 +388,9 @@ pub fn solve(
                 Err(SolveError::Failed { .. }) => {}
                 Err(e) => return Err(e),
             }
-            if !descends(slope) {
+            if descends(slope) {
+                backoff = 0;
+            } else {
                 // A failed attempt costs a CG run: back off exponentially before the next.
                 totals.exact_newton_failures += 1;
                 used = Phase::Newton;
@@ -428,10 +430,31 @@ pub fn solve(
             cg_iterations += c;
             used = Phase::Proxy;
         }
-        let max_step = line_search::max_flip_free(&grads, problem.faces, &x, &d);
-        let t_start = (line_search::FLIP_FREE_FRACTION * max_step).min(1.0);
         let f = |y: &[f64]| problem.objective(&grads, y);
-        let Some(acc) = line_search::armijo(&f, &x, &d, f0, slope, t_start) else {
+        let mut max_step = line_search::max_flip_free(&grads, problem.faces, &x, &d);
+        let t_start = (line_search::FLIP_FREE_FRACTION * max_step).min(1.0);
+        let mut accepted = line_search::armijo(&f, &x, &d, f0, slope, t_start);
+        if accepted.is_none() && used != Phase::Proxy {
+            // A Newton direction can be too poor a model to decrease at all (rounding near
+            // the optimum, or a bad inexact solve): the proxy direction gets the last word.
+            let (s, c) = direction(
+                &problem,
+                &grads,
+                &x,
+                &g,
+                Phase::Proxy,
+                &mut pattern,
+                opts,
+                grad_norm,
+                &mut d,
+            )?;
+            cg_iterations += c;
+            used = Phase::Proxy;
+            max_step = line_search::max_flip_free(&grads, problem.faces, &x, &d);
+            let t_start = (line_search::FLIP_FREE_FRACTION * max_step).min(1.0);
+            accepted = line_search::armijo(&f, &x, &d, f0, s, t_start);
+        }
+        let Some(acc) = accepted else {
             stop = StopReason::Stalled;
             break;
         };
