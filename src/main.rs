@@ -74,6 +74,8 @@ enum SolverArg {
     None,
     /// ADMM (per-face Newton, per-edge projection, dual update).
     Admm,
+    /// Global proxy + projected-Newton solver with flip-free line search (CPU; Tutte start).
+    Global,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -106,7 +108,7 @@ struct ParamArgs {
     /// Output OBJ: the input's v and f order, plus one vt per vertex.
     #[arg(short, long)]
     output: PathBuf,
-    /// Start map. Default: lscm with the ADMM solver, tutte without.
+    /// Start map. Default: lscm with the ADMM solver, tutte otherwise.
     #[arg(long, value_enum)]
     init: Option<InitArg>,
     #[arg(long, value_enum, default_value = "admm")]
@@ -411,12 +413,29 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     let solver = match args.solver {
         SolverArg::None => SolverChoice::None,
         SolverArg::Admm => SolverChoice::Admm,
+        SolverArg::Global => SolverChoice::Global,
     };
+    // The global solver runs on the CPU with its own documented stopping rule.
+    let admm_only = args.mu.is_some()
+        || args.max_iters.is_some()
+        || args.resync.is_some()
+        || args.tol_primal.is_some()
+        || args.tol_dual.is_some()
+        || args.tol_energy.is_some()
+        || args.newton_iters.is_some()
+        || matches!(args.backend, BackendArg::Vulkan);
+    if solver == SolverChoice::Global && admm_only {
+        return Err(foldfree::Error::Usage(
+            "--solver global runs on the CPU with its own stopping rule: --backend vulkan, \
+             --mu, --max-iters, --resync, --tol-* and --newton-iters apply to ADMM only"
+                .into(),
+        ));
+    }
     let init = match args.init {
         Some(InitArg::Tutte) => InitMethod::Tutte(TutteWeights::Uniform),
         Some(InitArg::TutteMeanValue) => InitMethod::Tutte(TutteWeights::MeanValue),
         Some(InitArg::Lscm) => InitMethod::Lscm,
-        None if solver == SolverChoice::None => InitMethod::Tutte(TutteWeights::Uniform),
+        None if solver != SolverChoice::Admm => InitMethod::Tutte(TutteWeights::Uniform),
         None => InitMethod::Lscm,
     };
     let stop = Arc::new(AtomicBool::new(false));
@@ -493,7 +512,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     }
     job.cut_options.stretch_limit = args.stretch_limit;
 
-    let bar = if args.quiet || solver == SolverChoice::None {
+    let bar = if args.quiet || solver != SolverChoice::Admm {
         indicatif::ProgressBar::hidden()
     } else {
         let b = indicatif::ProgressBar::new(job.admm.max_iters as u64);

@@ -29,6 +29,8 @@ pub enum SolverChoice {
     None,
     /// ADMM on the chosen backend.
     Admm,
+    /// The global proxy/Newton solver ([`crate::param::global`]) on the CPU.
+    Global,
 }
 
 /// Where ADMM runs.
@@ -176,6 +178,8 @@ pub struct MapOutput {
     pub init_flips: usize,
     /// The ADMM run, when the solver ran.
     pub admm: Option<admm::AdmmResult>,
+    /// The global solver's run, when it ran.
+    pub global: Option<crate::param::global::GlobalResult>,
     /// Per-kernel device times (Vulkan with `profile`).
     pub kernel_times: Option<admm::vulkan::KernelTimes>,
     /// Bytes the kernels move per iteration (Vulkan).
@@ -211,6 +215,7 @@ pub fn compute_map(
         uv: Vec::new(),
         init_flips,
         admm: None,
+        global: None,
         kernel_times: None,
         bytes_per_iteration: None,
         seconds_init,
@@ -269,6 +274,21 @@ pub fn compute_map(
         };
         uv.clone_from(&result.uv);
         out.admm = Some(result);
+    } else if solver == SolverChoice::Global {
+        use crate::param::global::{self, GlobalOptions};
+        // A folded start (LSCM can fold) is replaced by uniform Tutte: the solver never
+        // crosses det = 0, so it cannot unfold.
+        if init_flips > 0 {
+            uv = initial_map(mesh, topo, InitMethod::Tutte(TutteWeights::Uniform))?;
+            normalize_area(mesh, &mut uv, area_3d);
+        }
+        let gopts = GlobalOptions {
+            stop: opts.stop.clone(),
+            ..GlobalOptions::for_energy(opts.energy)
+        };
+        let result = global::solve(mesh, &frames, &uv, &gopts, &mut |_| {})?;
+        uv.clone_from(&result.uv);
+        out.global = Some(result);
     }
     out.seconds_solve = t2.elapsed().as_secs_f64();
     let flips = crate::init::count_flips(&mesh.faces, &uv);
@@ -335,7 +355,8 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     )?;
     let uv = map.uv;
     let m = metrics::evaluate(&mesh.positions, &mesh.faces, &uv, &topo.boundary_loops);
-    let converged = map.admm.as_ref().map_or(true, |r| r.converged);
+    let converged = map.admm.as_ref().map_or(true, |r| r.converged)
+        && map.global.as_ref().map_or(true, |r| r.converged());
     let written = converged || job.keep_best;
     if written {
         mesh::obj::write_obj_with_uv(&job.output, &mesh, &uv).map_err(|source| Error::Io {
@@ -365,6 +386,13 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
         report.history = result.history;
     }
     report.written = written;
+    if let Some(result) = map.global {
+        report.solver = "global".into();
+        report.energy = Some(energy_name(job.admm.energy).into());
+        report.iterations = result.iterations;
+        report.converged = Some(result.converged());
+        report.global = Some(result);
+    }
     report.input = job.input.display().to_string();
     report.output = job.output.display().to_string();
     report.vertices = mesh.positions.len();
@@ -466,9 +494,18 @@ fn run_atlas(
                 report.mu_rel = Some(result.mu_rel_final);
             }
         }
+        if let Some(result) = map.global {
+            report.solver = "global".into();
+            report.iterations += result.iterations;
+            converged &= result.converged();
+            if faces.len() > largest {
+                largest = faces.len();
+                report.global = Some(result);
+            }
+        }
         chart_meshes.push((global, sub));
     }
-    if report.solver == "admm" {
+    if report.solver != "none" {
         report.converged = Some(converged);
         report.energy = Some(energy_name(job.admm.energy).into());
     }

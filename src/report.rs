@@ -47,6 +47,10 @@ pub struct ParamReport {
     /// Seams, charts and packing, when the mesh was cut into charts.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub atlas: Option<AtlasReport>,
+    /// The global solver's stop reason, per-phase totals and per-iteration history
+    /// (`--solver global` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub global: Option<crate::param::global::GlobalResult>,
 }
 
 /// What cutting and packing did (`foldfree param` on a mesh that is not a disk).

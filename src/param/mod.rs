@@ -4,6 +4,7 @@
 pub mod admm;
 pub mod cut;
 pub mod energy;
+pub mod global;
 pub mod pack;
 pub mod recover;
 

@@ -1,0 +1,621 @@
+//! The bounded-distortion global solver (issue 4), after Cai, Sun & Ge, "A mesh
+//! parameterization method with limiting distortion": from a flip-free start (Tutte), minimise
+//! the area-weighted mean of a distortion energy (symmetric Dirichlet or MIPS) over the vertex
+//! UVs of one disk-topology mesh.
+//!
+//! Each iteration solves one sparse SPD system over the interleaved UVs for a direction —
+//! the SLIM-like proxy ([`proxy`]) while the energy still falls by more than
+//! [`GlobalOptions::proxy_switch`] per step, then projected Newton ([`cm`]) — and moves along
+//! it by the largest flip-free step ([`line_search`]) with Armijo backtracking, so every
+//! iterate is foldover-free and the objective decreases monotonically. While some faces are
+//! over the distortion bound, the objective is taken w.r.t. progressive reference triangles
+//! ([`progressive`]). Systems share one CSR pattern ([`assembly`]) and are solved by
+//! preconditioned CG ([`crate::linalg::cg::KrylovSolver`]).
+//!
+//! Stops at a scale-free gradient norm `‖∇E‖·√(3D area)` under the tolerance (the paper's
+//! 1e-6 for symmetric Dirichlet, 1e-4 for MIPS), when no step decreases the energy any more
+//! (rounding level), at the iteration cap, or when the caller's flag is raised.
+#![forbid(unsafe_code)]
+
+pub mod assembly;
+pub mod cm;
+pub mod line_search;
+pub mod progressive;
+pub mod proxy;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
+use crate::linalg::SolveError;
+use crate::mesh::{FaceFrames, TriMesh};
+use crate::param::energy::{self, Energy};
+use assembly::{face_gradients, jacobian, pull_back, pull_back_matrix, FaceGradient, Pattern};
+
+/// Options of [`solve`].
+#[derive(Clone, Debug)]
+pub struct GlobalOptions {
+    pub energy: Energy,
+    /// Iteration cap (the paper's 100).
+    pub max_iters: usize,
+    /// Scale-free gradient-norm tolerance `‖∇E‖·√(area)`.
+    pub grad_tol: f64,
+    /// Stay in the proxy phase while the relative objective decrease per step exceeds this.
+    pub proxy_switch: f64,
+    /// Per-face energy bound for progressive references (`None`: always the rest triangles).
+    pub progressive_cap: Option<f64>,
+    /// Iterations after which progressive references are dropped even if some faces are
+    /// still over the bound.
+    pub progressive_max_iters: usize,
+    /// Preconditioner of the CG solves.
+    pub preconditioner: Preconditioner,
+    /// Relative CG tolerance in the proxy phase (a direction only needs to be rough).
+    pub cg_tol_proxy: f64,
+    /// Tightest relative CG tolerance in the Newton phase (the solve is looser while the
+    /// gradient is large).
+    pub cg_tol_newton: f64,
+    pub cg_max_iters: usize,
+    /// Try the exact Hessian after a full Newton step was accepted.
+    pub exact_newton: bool,
+    /// Raised by the caller (Ctrl-C) to stop after the current iteration.
+    pub stop: Option<Arc<AtomicBool>>,
+}
+
+impl GlobalOptions {
+    /// The documented defaults for `energy`.
+    pub fn for_energy(energy: Energy) -> GlobalOptions {
+        GlobalOptions {
+            energy,
+            max_iters: 100,
+            grad_tol: match energy {
+                Energy::SymmetricDirichlet => 1e-6,
+                Energy::Mips => 1e-4,
+            },
+            proxy_switch: 0.1,
+            progressive_cap: Some(match energy {
+                Energy::SymmetricDirichlet => 50.0,
+                Energy::Mips => 20.0,
+            }),
+            progressive_max_iters: 30,
+            preconditioner: Preconditioner::Amg { block_size: 2 },
+            cg_tol_proxy: 1e-2,
+            cg_tol_newton: 1e-8,
+            cg_max_iters: 2000,
+            exact_newton: true,
+            stop: None,
+        }
+    }
+}
+
+/// Which direction an iteration took.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// SLIM-like reweighted Laplacian.
+    Proxy,
+    /// Projected Newton (composite-majorization phase).
+    Newton,
+    /// Newton with the exact Hessian (tried near the optimum, where the sum over faces is
+    /// positive definite although single faces are not; falls back to the projected one).
+    ExactNewton,
+}
+
+/// Why [`solve`] returned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    GradientTolerance,
+    MaxIterations,
+    /// No step along the direction decreased the energy (converged to rounding).
+    Stalled,
+    Interrupted,
+}
+
+/// One iteration of [`solve`].
+#[derive(Clone, Debug, Serialize)]
+pub struct GlobalIteration {
+    pub iteration: usize,
+    pub phase: Phase,
+    /// Objective before and after the step (w.r.t. the references in use).
+    pub objective_before: f64,
+    pub objective_after: f64,
+    /// True energy (rest references) after the step.
+    pub energy: f64,
+    /// Scale-free gradient norm of the objective before the step.
+    pub grad_norm: f64,
+    /// Accepted step and the largest flip-free step along the direction.
+    pub step: f64,
+    pub max_step: f64,
+    pub cg_iterations: usize,
+    /// Faces on a progressive reference (0: the true problem).
+    pub capped_faces: usize,
+    /// Seconds since the solver started.
+    pub seconds: f64,
+}
+
+/// Iterations and seconds per phase.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct PhaseTotals {
+    pub proxy_iterations: usize,
+    pub proxy_seconds: f64,
+    pub newton_iterations: usize,
+    pub newton_seconds: f64,
+    /// Of the Newton iterations, those that used the exact Hessian.
+    pub exact_newton_iterations: usize,
+    /// Exact-Hessian attempts that found negative curvature (their CG runs are wasted).
+    pub exact_newton_failures: usize,
+}
+
+/// What [`solve`] returns.
+#[derive(Clone, Debug, Serialize)]
+pub struct GlobalResult {
+    /// #V flip-free UVs (MIPS: scaled to the 3D area).
+    #[serde(skip)]
+    pub uv: Vec<[f64; 2]>,
+    pub iterations: usize,
+    pub stop: StopReason,
+    /// Final true energy (area-weighted mean) and scale-free gradient norm.
+    pub energy: f64,
+    pub grad_norm: f64,
+    pub totals: PhaseTotals,
+    pub history: Vec<GlobalIteration>,
+}
+
+impl GlobalResult {
+    /// Whether the run reached the gradient tolerance, or stalled because no step along the
+    /// direction lowered the energy any more (converged to rounding). An iteration cap or an
+    /// interruption is not convergence.
+    pub fn converged(&self) -> bool {
+        matches!(
+            self.stop,
+            StopReason::GradientTolerance | StopReason::Stalled
+        )
+    }
+}
+
+/// The fixed data of a solve.
+struct Problem<'a> {
+    energy: Energy,
+    faces: &'a [[u32; 3]],
+    rest: Vec<FaceGradient>,
+    /// `area_f / total area`.
+    weight: Vec<f64>,
+    /// √(total 3D area): makes gradient norms scale-free.
+    grad_scale: f64,
+}
+
+impl Problem<'_> {
+    /// `Σ w_f E(A_f)` under `grads`; +∞ if any face is flipped or degenerate.
+    fn objective(&self, grads: &[FaceGradient], x: &[f64]) -> f64 {
+        self.faces
+            .par_iter()
+            .zip(grads.par_iter())
+            .zip(self.weight.par_iter())
+            .map(|((f, g), w)| w * energy::value(self.energy, &jacobian(g, f, x)))
+            .sum()
+    }
+
+    /// Gradient of the objective under `grads` (2·#V).
+    fn gradient(&self, grads: &[FaceGradient], x: &[f64]) -> Vec<f64> {
+        let local: Vec<[f64; 6]> = self
+            .faces
+            .par_iter()
+            .zip(grads.par_iter())
+            .zip(self.weight.par_iter())
+            .map(|((f, g), w)| {
+                let (_, ge, _) = energy::eval(self.energy, &jacobian(g, f, x));
+                pull_back(g, &ge.map(|v| v * w))
+            })
+            .collect();
+        let mut out = vec![0.0; x.len()];
+        for (f, l) in self.faces.iter().zip(&local) {
+            for k in 0..3 {
+                out[2 * f[k] as usize] += l[2 * k];
+                out[2 * f[k] as usize + 1] += l[2 * k + 1];
+            }
+        }
+        out
+    }
+}
+
+/// The solver's objective at `uv` (area-weighted mean energy, +∞ when a face is flipped) and
+/// its gradient over the interleaved UVs `[u0, v0, u1, …]`: what [`solve`] minimises, for
+/// checks and for callers that want to score a map the way the solver does.
+pub fn objective_and_gradient(
+    mesh: &TriMesh,
+    frames: &FaceFrames,
+    energy: Energy,
+    uv: &[[f64; 2]],
+) -> Result<(f64, Vec<f64>), SolveError> {
+    let total: f64 = frames.area.iter().sum();
+    if uv.len() != mesh.positions.len() || total.is_nan() || total <= 0.0 {
+        return Err(SolveError::InvalidInput {
+            what: format!(
+                "{} UVs for {} vertices (total area {total})",
+                uv.len(),
+                mesh.positions.len()
+            ),
+        });
+    }
+    let problem = Problem {
+        energy,
+        faces: &mesh.faces,
+        rest: face_gradients(frames)?,
+        weight: frames.area.iter().map(|a| a / total).collect(),
+        grad_scale: total.sqrt(),
+    };
+    let x: Vec<f64> = uv.iter().flat_map(|p| [p[0], p[1]]).collect();
+    let e = problem.objective(&problem.rest, &x);
+    let g = if e.is_finite() {
+        problem.gradient(&problem.rest, &x)
+    } else {
+        vec![f64::NAN; x.len()]
+    };
+    Ok((e, g))
+}
+
+/// Relative diagonal shift of every system (see [`Pattern::fill`]).
+const REL_SHIFT: f64 = 1e-9;
+
+/// CG tolerance of a Newton solve per unit of scale-free gradient norm.
+const FORCING: f64 = 0.01;
+
+/// Longest wait (iterations) between exact-Hessian attempts.
+const MAX_BACKOFF: usize = 4;
+
+/// Progressive references end once fewer than one face in this many is capped.
+const PROGRESSIVE_MIN_SHARE: usize = 1000;
+
+/// Objective decreases below this relative size count as no progress.
+const STALL: f64 = 1e-13;
+
+/// Whether a directional derivative is a (finite) descent slope; NaN is not.
+fn descends(slope: f64) -> bool {
+    slope < 0.0
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.par_iter().zip(b.par_iter()).map(|(x, y)| x * y).sum()
+}
+
+/// Minimises the energy of `opts` over the UVs of `mesh` from the flip-free start `uv0`.
+/// `progress` sees every iteration. Errors: a start map that is flipped or non-finite, a
+/// degenerate face, a failed linear solve; the result is verified flip-free and finite.
+pub fn solve(
+    mesh: &TriMesh,
+    frames: &FaceFrames,
+    uv0: &[[f64; 2]],
+    opts: &GlobalOptions,
+    progress: &mut dyn FnMut(&GlobalIteration),
+) -> Result<GlobalResult, SolveError> {
+    let t0 = Instant::now();
+    let nv = mesh.positions.len();
+    if uv0.len() != nv {
+        return Err(SolveError::InvalidInput {
+            what: format!("{} UVs for {nv} vertices", uv0.len()),
+        });
+    }
+    let total: f64 = frames.area.iter().sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return Err(SolveError::InvalidInput {
+            what: "the mesh has no area".into(),
+        });
+    }
+    let problem = Problem {
+        energy: opts.energy,
+        faces: &mesh.faces,
+        rest: face_gradients(frames)?,
+        weight: frames.area.iter().map(|a| a / total).collect(),
+        grad_scale: total.sqrt(),
+    };
+    let mut x: Vec<f64> = uv0.iter().flat_map(|p| [p[0], p[1]]).collect();
+    if !problem.objective(&problem.rest, &x).is_finite() {
+        return Err(SolveError::InvalidInput {
+            what: "the start map of the global solver has flipped, degenerate or non-finite faces"
+                .into(),
+        });
+    }
+    let mut pattern = Pattern::new(mesh)?;
+    let mut history = Vec::new();
+    let mut totals = PhaseTotals::default();
+    let mut phase = Phase::Proxy;
+    let mut progressive = opts.progressive_cap.is_some();
+    let mut d = vec![0.0; x.len()];
+    let mut stop = StopReason::MaxIterations;
+    let mut iterations = 0;
+    let mut try_exact = false;
+    let mut e_prev = f64::INFINITY;
+    // Iterations to wait before the next exact-Hessian attempt, and the current back-off.
+    let (mut wait, mut backoff) = (0usize, 0usize);
+
+    for it in 0..opts.max_iters {
+        if opts
+            .stop
+            .as_ref()
+            .is_some_and(|s| s.load(Ordering::Relaxed))
+        {
+            stop = StopReason::Interrupted;
+            break;
+        }
+        let t_it = Instant::now();
+        // References of this iteration.
+        let (grads, capped) = match (progressive, opts.progressive_cap) {
+            (true, Some(cap)) if it < opts.progressive_max_iters => {
+                let pairs: Vec<(FaceGradient, bool)> = problem
+                    .faces
+                    .par_iter()
+                    .zip(problem.rest.par_iter())
+                    .map(|(f, g)| {
+                        progressive::capped_gradient(opts.energy, g, &jacobian(g, f, &x), cap)
+                    })
+                    .collect();
+                let capped = pairs.iter().filter(|p| p.1).count();
+                (pairs.into_iter().map(|p| p.0).collect::<Vec<_>>(), capped)
+            }
+            _ => (problem.rest.clone(), 0),
+        };
+        if capped == 0 {
+            progressive = false;
+        }
+        let f0 = problem.objective(&grads, &x);
+        let g = problem.gradient(&grads, &x);
+        let grad_norm = dot(&g, &g).sqrt() * problem.grad_scale;
+        if capped == 0 && grad_norm <= opts.grad_tol {
+            stop = StopReason::GradientTolerance;
+            break;
+        }
+        // Projected Newton converges only linearly where faces are non-convex (their clamped
+        // modes); once full steps are accepted the exact Hessian is tried: near a minimum the
+        // assembled one is positive definite, and CG reports when it is not.
+        let allow_exact = wait == 0;
+        wait = wait.saturating_sub(1);
+        let mut used = if phase == Phase::Newton && try_exact && opts.exact_newton && allow_exact {
+            Phase::ExactNewton
+        } else {
+            phase
+        };
+        let mut cg_iterations = 0;
+        let mut slope = f64::NAN;
+        if used == Phase::ExactNewton {
+            match direction(
+                &problem,
+                &grads,
+                &x,
+                &g,
+                used,
+                &mut pattern,
+                opts,
+                grad_norm,
+                &mut d,
+            ) {
+                Ok((s, c)) => {
+                    cg_iterations += c;
+                    slope = s;
+                }
+                // Negative curvature: not near a minimum yet.
+                Err(SolveError::Failed { .. }) => {}
+                Err(e) => return Err(e),
+            }
+            if descends(slope) {
+                backoff = 0;
+            } else {
+                // A failed attempt costs a CG run: back off exponentially before the next.
+                totals.exact_newton_failures += 1;
+                used = Phase::Newton;
+                backoff = (2 * backoff).clamp(1, MAX_BACKOFF);
+                wait = backoff;
+            }
+        }
+        if used != Phase::ExactNewton {
+            let (s, c) = direction(
+                &problem,
+                &grads,
+                &x,
+                &g,
+                used,
+                &mut pattern,
+                opts,
+                grad_norm,
+                &mut d,
+            )?;
+            slope = s;
+            cg_iterations += c;
+        }
+        if used == Phase::Newton && !descends(slope) {
+            // An inexact or indefinite Newton solve: the proxy direction always descends.
+            let (s, c) = direction(
+                &problem,
+                &grads,
+                &x,
+                &g,
+                Phase::Proxy,
+                &mut pattern,
+                opts,
+                grad_norm,
+                &mut d,
+            )?;
+            slope = s;
+            cg_iterations += c;
+            used = Phase::Proxy;
+        }
+        let f = |y: &[f64]| problem.objective(&grads, y);
+        let mut max_step = line_search::max_flip_free(&grads, problem.faces, &x, &d);
+        let t_start = (line_search::FLIP_FREE_FRACTION * max_step).min(1.0);
+        let mut accepted = line_search::armijo(&f, &x, &d, f0, slope, t_start);
+        if accepted.is_none() && used != Phase::Proxy {
+            // A Newton direction can be too poor a model to decrease at all (rounding near
+            // the optimum, or a bad inexact solve): the proxy direction gets the last word.
+            let (s, c) = direction(
+                &problem,
+                &grads,
+                &x,
+                &g,
+                Phase::Proxy,
+                &mut pattern,
+                opts,
+                grad_norm,
+                &mut d,
+            )?;
+            cg_iterations += c;
+            used = Phase::Proxy;
+            max_step = line_search::max_flip_free(&grads, problem.faces, &x, &d);
+            let t_start = (line_search::FLIP_FREE_FRACTION * max_step).min(1.0);
+            accepted = line_search::armijo(&f, &x, &d, f0, s, t_start);
+        }
+        let Some(acc) = accepted else {
+            stop = StopReason::Stalled;
+            break;
+        };
+        x.par_iter_mut()
+            .zip(d.par_iter())
+            .for_each(|(xi, di)| *xi += acc.step * di);
+        iterations = it + 1;
+        let e_true = if capped == 0 {
+            acc.value
+        } else {
+            problem.objective(&problem.rest, &x)
+        };
+        let rel = (f0 - acc.value) / f0.abs().max(f64::MIN_POSITIVE);
+        let secs = t_it.elapsed().as_secs_f64();
+        match used {
+            Phase::Proxy => {
+                totals.proxy_iterations += 1;
+                totals.proxy_seconds += secs;
+            }
+            Phase::Newton | Phase::ExactNewton => {
+                totals.newton_iterations += 1;
+                totals.newton_seconds += secs;
+                if used == Phase::ExactNewton {
+                    totals.exact_newton_iterations += 1;
+                }
+            }
+        }
+        try_exact = phase == Phase::Newton && acc.step == 1.0;
+        let rec = GlobalIteration {
+            iteration: it + 1,
+            phase: used,
+            objective_before: f0,
+            objective_after: acc.value,
+            energy: e_true,
+            grad_norm,
+            step: acc.step,
+            max_step,
+            cg_iterations,
+            capped_faces: capped,
+            seconds: t0.elapsed().as_secs_f64(),
+        };
+        progress(&rec);
+        history.push(rec);
+        if phase == Phase::Proxy && rel <= opts.proxy_switch {
+            phase = Phase::Newton;
+        }
+        // A reference that follows a few stubborn faces lets the surrogate fall while the
+        // true energy rises: progressive references end once they are that few, or as soon as
+        // the true energy went up.
+        if capped > 0 && (e_true > e_prev || capped * PROGRESSIVE_MIN_SHARE <= problem.faces.len())
+        {
+            progressive = false;
+        }
+        e_prev = e_true;
+        if capped == 0 && rel <= STALL {
+            stop = StopReason::Stalled;
+            break;
+        }
+    }
+
+    let energy = problem.objective(&problem.rest, &x);
+    let g = problem.gradient(&problem.rest, &x);
+    let grad_norm = dot(&g, &g).sqrt() * problem.grad_scale;
+    if stop == StopReason::Stalled && grad_norm <= opts.grad_tol {
+        // Stalled at rounding level after the last step already met the tolerance.
+        stop = StopReason::GradientTolerance;
+    }
+    let mut uv: Vec<[f64; 2]> = x.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+    if opts.energy == Energy::Mips {
+        // MIPS has no scale: report the map at the 3D area, like the start map.
+        crate::pipeline::normalize_area(mesh, &mut uv, total);
+    }
+    let flips = crate::init::count_flips(&mesh.faces, &uv);
+    if flips > 0 || !energy.is_finite() {
+        return Err(SolveError::Failed {
+            what: format!("global solver: {flips} flipped faces in the result (energy {energy})"),
+        });
+    }
+    if uv.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite {
+            what: "global solver UVs".into(),
+        });
+    }
+    Ok(GlobalResult {
+        uv,
+        iterations,
+        stop,
+        energy,
+        grad_norm,
+        totals,
+        history,
+    })
+}
+
+/// Writes the search direction of `phase` into `d` (solving `K d = −g`) and returns the slope
+/// `gᵀd` and the CG iterations. A CG solve that stops at its iteration cap still gives a usable
+/// direction (checked by the slope), so only hard failures are errors.
+#[allow(clippy::too_many_arguments)]
+fn direction(
+    problem: &Problem,
+    grads: &[FaceGradient],
+    x: &[f64],
+    g: &[f64],
+    phase: Phase,
+    pattern: &mut Pattern,
+    opts: &GlobalOptions,
+    grad_norm: f64,
+    d: &mut [f64],
+) -> Result<(f64, usize), SolveError> {
+    let local: Vec<[[f64; 6]; 6]> = problem
+        .faces
+        .par_iter()
+        .zip(grads.par_iter())
+        .zip(problem.weight.par_iter())
+        .map(|((f, gr), &w)| {
+            let a = jacobian(gr, f, x);
+            let m = match phase {
+                Phase::Proxy => proxy::proxy_matrix(problem.energy, &a, w),
+                Phase::Newton => cm::projected_hessian(problem.energy, &a, w),
+                Phase::ExactNewton => energy::eval(problem.energy, &a).2.map(|r| r.map(|v| v * w)),
+            };
+            pull_back_matrix(gr, &m)
+        })
+        .collect();
+    pattern.fill(problem.faces, &local, REL_SHIFT);
+    let cg = CgOptions {
+        tolerance: match phase {
+            Phase::Proxy => opts.cg_tol_proxy,
+            // Inexact Newton (Eisenstat & Walker 1996): a loose solve far from the optimum,
+            // tightening with the gradient so the final convergence stays superlinear.
+            Phase::Newton | Phase::ExactNewton => {
+                (FORCING * grad_norm).clamp(opts.cg_tol_newton, opts.cg_tol_newton.max(1e-2))
+            }
+        },
+        max_iterations: opts.cg_max_iters,
+        preconditioner: opts.preconditioner,
+    };
+    let solver = KrylovSolver::cg(&pattern.matrix, &cg)?;
+    let rhs: Vec<f64> = g.iter().map(|v| -v).collect();
+    d.fill(0.0);
+    let iterations = match solver.solve(&rhs, d) {
+        Ok(stats) => stats.iterations,
+        Err(SolveError::CgNoConvergence { iterations, .. }) => iterations,
+        Err(e) => return Err(e),
+    };
+    if d.iter().any(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite {
+            what: "global solver search direction".into(),
+        });
+    }
+    Ok((dot(g, d), iterations))
+}

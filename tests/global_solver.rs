@@ -1,0 +1,289 @@
+//! The global solver (`--solver global`, `param::global`): exactness on a flat grid, quality
+//! and validity on the camel, derivative and step-bound checks, monotone descent, the CLI.
+
+#[path = "common/tempdir.rs"]
+mod tempdir;
+
+use std::path::Path;
+use std::process::Command;
+
+use foldfree::init::tutte::TutteWeights;
+use foldfree::mesh::{self, FaceFrames, Topology, TriMesh};
+use foldfree::metrics;
+use foldfree::param::global::{self, line_search, GlobalOptions, Phase, StopReason};
+use foldfree::param::Energy;
+use foldfree::pipeline::{initial_map, normalize_area, InitMethod};
+use tempdir::TempDir;
+
+fn load(name: &str) -> (TriMesh, Topology, FaceFrames, Vec<[f64; 2]>) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name);
+    let (m, topo, _) = mesh::load(&path, &mesh::ValidateOptions::default()).expect("load");
+    let frames = mesh::frames::compute(&m);
+    let area: f64 = frames.area.iter().sum();
+    let mut uv =
+        initial_map(&m, &topo, InitMethod::Tutte(TutteWeights::Uniform)).expect("tutte start");
+    normalize_area(&m, &mut uv, area);
+    (m, topo, frames, uv)
+}
+
+/// Deterministic pseudo-random numbers in [0, 1) (no dev-dependency needed).
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+#[test]
+fn flat_grid_reaches_the_isometry() {
+    let (m, topo, frames, uv) = load("square_grid_10x10.obj");
+    // The Tutte start puts the boundary on a circle: far from isometric.
+    let start = metrics::evaluate(&m.positions, &m.faces, &uv, &topo.boundary_loops);
+    assert!(start.sd_energy > 5.0, "start SD {}", start.sd_energy);
+    let r = global::solve(
+        &m,
+        &frames,
+        &uv,
+        &GlobalOptions::for_energy(Energy::SymmetricDirichlet),
+        &mut |_| {},
+    )
+    .expect("solve");
+    assert_eq!(r.stop, StopReason::GradientTolerance);
+    assert!((r.energy - 4.0).abs() < 1e-9, "solver SD {}", r.energy);
+    let me = metrics::evaluate(&m.positions, &m.faces, &r.uv, &topo.boundary_loops);
+    assert_eq!(me.flips, 0);
+    assert!(
+        (me.sd_energy - 4.0).abs() < 1e-9,
+        "metrics SD {}",
+        me.sd_energy
+    );
+    assert!(
+        (me.delta_con_max - 1.0).abs() < 1e-5,
+        "max δcon {}",
+        me.delta_con_max
+    );
+}
+
+#[test]
+fn camel_sd_reaches_slim_quality_flip_free_with_monotone_descent() {
+    let (m, topo, frames, uv) = load("camel_open.obj");
+    let mut seen = Vec::new();
+    let r = global::solve(
+        &m,
+        &frames,
+        &uv,
+        &GlobalOptions::for_energy(Energy::SymmetricDirichlet),
+        &mut |h| seen.push(h.clone()),
+    )
+    .expect("solve");
+    let me = metrics::evaluate(&m.positions, &m.faces, &r.uv, &topo.boundary_loops);
+    assert_eq!(me.flips, 0);
+    // libigl SLIM's converged value on this mesh (../shared/peers.md) is 4.0915.
+    assert!(me.sd_energy <= 4.0915 * 1.01, "SD {}", me.sd_energy);
+    assert_eq!(r.stop, StopReason::GradientTolerance);
+    assert!(r.grad_norm <= 1e-6);
+    // Both phases ran, the proxy first.
+    assert_eq!(seen[0].phase, Phase::Proxy);
+    assert!(seen.iter().any(|h| h.phase != Phase::Proxy));
+    assert_eq!(seen.len(), r.history.len());
+    for h in &r.history {
+        assert!(
+            h.objective_after <= h.objective_before,
+            "iteration {}",
+            h.iteration
+        );
+        assert!(h.step > 0.0 && h.step < h.max_step);
+    }
+    // On the true reference (no capped faces) the objective is the energy: monotone.
+    let true_ref: Vec<_> = r.history.iter().filter(|h| h.capped_faces == 0).collect();
+    assert!(true_ref.len() > 3);
+    for w in true_ref.windows(2) {
+        assert!(w[1].energy <= w[0].energy);
+    }
+}
+
+#[test]
+fn without_progressive_references_the_true_energy_decreases_monotonically() {
+    let (m, _, frames, uv) = load("camel_open.obj");
+    let opts = GlobalOptions {
+        progressive_cap: None,
+        max_iters: 8,
+        ..GlobalOptions::for_energy(Energy::SymmetricDirichlet)
+    };
+    let (e0, _) =
+        global::objective_and_gradient(&m, &frames, Energy::SymmetricDirichlet, &uv).unwrap();
+    let r = global::solve(&m, &frames, &uv, &opts, &mut |_| {}).expect("solve");
+    let mut prev = e0;
+    for h in &r.history {
+        assert_eq!(h.capped_faces, 0);
+        assert!((h.objective_before - prev).abs() <= 1e-12 * prev);
+        assert!(
+            h.energy < prev,
+            "iteration {}: {} ≥ {prev}",
+            h.iteration,
+            h.energy
+        );
+        prev = h.energy;
+    }
+    assert_eq!(r.iterations, 8);
+    assert_eq!(r.stop, StopReason::MaxIterations);
+}
+
+#[test]
+fn camel_mips_is_near_the_best_conformal_map() {
+    let (m, topo, frames, uv) = load("camel_open.obj");
+    let r = global::solve(
+        &m,
+        &frames,
+        &uv,
+        &GlobalOptions::for_energy(Energy::Mips),
+        &mut |_| {},
+    )
+    .expect("solve");
+    let me = metrics::evaluate(&m.positions, &m.faces, &r.uv, &topo.boundary_loops);
+    assert_eq!(me.flips, 0);
+    // Best mean δcon among peers (../shared/peers.md): 1.1363.
+    assert!(
+        me.delta_con_mean <= 1.1363 * 1.01,
+        "δcon {}",
+        me.delta_con_mean
+    );
+    // MIPS is scale-free: the result is returned at the 3D area.
+    assert!((me.uv_area / me.area_3d - 1.0).abs() < 1e-9);
+}
+
+#[test]
+fn mesh_gradient_matches_finite_differences() {
+    let (m, _, frames, uv) = load("camel_open.obj");
+    for energy in [Energy::SymmetricDirichlet, Energy::Mips] {
+        let (e, g) = global::objective_and_gradient(&m, &frames, energy, &uv).unwrap();
+        assert!(e.is_finite());
+        let mut rng = Lcg(7);
+        for _ in 0..20 {
+            let i = (rng.next() * (2 * uv.len()) as f64) as usize;
+            // Relative step on the coordinate: central differences, O(h²) error.
+            let h = 1e-7 * uv.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
+            let mut up = uv.clone();
+            let mut um = uv.clone();
+            up[i / 2][i % 2] += h;
+            um[i / 2][i % 2] -= h;
+            let ep = global::objective_and_gradient(&m, &frames, energy, &up)
+                .unwrap()
+                .0;
+            let em = global::objective_and_gradient(&m, &frames, energy, &um)
+                .unwrap()
+                .0;
+            let fd = (ep - em) / (2.0 * h);
+            let scale = g.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+            assert!(
+                (fd - g[i]).abs() <= 1e-5 * scale,
+                "{energy:?} x[{i}]: fd {fd} vs {}",
+                g[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn max_flip_free_step_is_the_first_determinant_root() {
+    // Random triangles (positively oriented in UV) and random directions: the step bound is
+    // exactly where the first face degenerates.
+    let mut rng = Lcg(42);
+    let g = [[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]];
+    let faces = [[0u32, 1, 2]];
+    let mut checked = 0;
+    for _ in 0..500 {
+        let mut x: Vec<f64> = (0..6).map(|_| rng.next() * 2.0 - 1.0).collect();
+        let area = |x: &[f64]| (x[2] - x[0]) * (x[5] - x[1]) - (x[4] - x[0]) * (x[3] - x[1]);
+        if area(&x) < 0.0 {
+            x.swap(2, 4);
+            x.swap(3, 5);
+        }
+        if area(&x) < 1e-3 {
+            continue;
+        }
+        let d: Vec<f64> = (0..6).map(|_| rng.next() * 4.0 - 2.0).collect();
+        let t = line_search::max_flip_free(&[g], &faces, &x, &d);
+        let at = |s: f64| -> Vec<f64> { x.iter().zip(&d).map(|(a, b)| a + s * b).collect() };
+        if t.is_finite() {
+            assert!(area(&at(0.999 * t)) > 0.0);
+            assert!(
+                area(&at(1.001 * t)) < 0.0,
+                "no sign change past the root {t}"
+            );
+            assert!(area(&at(t)).abs() < 1e-9);
+            checked += 1;
+        } else {
+            for s in [0.5, 1.0, 10.0, 1e3] {
+                assert!(area(&at(s)) > 0.0);
+            }
+        }
+    }
+    assert!(checked > 100, "only {checked} finite roots");
+}
+
+#[test]
+fn a_folded_start_is_refused() {
+    let (m, _, frames, mut uv) = load("square_grid_10x10.obj");
+    for p in &mut uv {
+        p[0] = -p[0]; // mirror: every face flips
+    }
+    let err = global::solve(
+        &m,
+        &frames,
+        &uv,
+        &GlobalOptions::for_energy(Energy::SymmetricDirichlet),
+        &mut |_| {},
+    );
+    assert!(err.is_err());
+}
+
+#[test]
+fn cli_solver_global_writes_a_flip_free_map_and_its_report() {
+    let tmp = TempDir::new("cli_solver_global");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/square_grid_10x10.obj");
+    let (out, report) = (tmp.join("grid.obj"), tmp.join("grid.json"));
+    let status = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .args(["param", "--solver", "global", "--energy", "sd", "-q", "-o"])
+        .arg(&out)
+        .arg("--report")
+        .arg(&report)
+        .arg(&input)
+        .status()
+        .expect("run foldfree");
+    assert!(status.success());
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["solver"], "global");
+    assert_eq!(r["init"], "tutte");
+    assert_eq!(r["flips"], 0);
+    assert_eq!(r["converged"], true);
+    assert!((r["sd_energy"].as_f64().unwrap() - 4.0).abs() < 1e-9);
+    assert_eq!(r["global"]["stop"], "gradient_tolerance");
+    assert!(!r["global"]["history"].as_array().unwrap().is_empty());
+    assert!(out.exists());
+}
+
+#[test]
+fn cli_solver_global_refuses_admm_only_flags() {
+    let tmp = TempDir::new("cli_solver_global_flags");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/square_grid_10x10.obj");
+    for extra in [&["--max-iters", "5"][..], &["--backend", "vulkan"][..]] {
+        let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+            .args(["param", "--solver", "global", "-q", "-o"])
+            .arg(tmp.join("x.obj"))
+            .args(extra)
+            .arg(&input)
+            .output()
+            .expect("run foldfree");
+        assert_eq!(out.status.code(), Some(2), "{extra:?}");
+        assert!(String::from_utf8_lossy(&out.stderr).contains("ADMM only"));
+        assert!(!tmp.join("x.obj").exists());
+    }
+}
