@@ -300,6 +300,8 @@ fn shared_meshes_sweep() {
         panic!("set FOLDFREE_SHARED_MESHES to the shared meshes folder");
     };
     let iters = std::env::var("FOLDFREE_SWEEP_ITERS").unwrap_or_else(|_| "2000".into());
+    // FOLDFREE_SWEEP_SOLVER=global sweeps the global solver (it has its own stop rule).
+    let solver = std::env::var("FOLDFREE_SWEEP_SOLVER").unwrap_or_else(|_| "admm".into());
     for name in [
         "closed/bunny_npm",
         "closed/cheburashka",
@@ -313,14 +315,13 @@ fn shared_meshes_sweep() {
         let input = Path::new(&root).join(format!("{name}.obj"));
         let dir = TempDir::new(&format!("sweep_{}", name.replace('/', "_")));
         for energy in ["mips", "sd"] {
-            let r = check_atlas(
-                &input,
-                &dir,
-                &["--energy", energy, "--max-iters", &iters],
-                1,
-            );
+            let mut args = vec!["--energy", energy, "--solver", solver.as_str()];
+            if solver == "admm" {
+                args.extend(["--max-iters", iters.as_str()]);
+            }
+            let r = check_atlas(&input, &dir, &args, 1);
             println!(
-                "| {name} | {energy} | {} | {} | {:.4} | {:.1}% | {} | {:.4} | {:.4} | {} | {} | {:.1} |",
+                "| {name} | {solver} {energy} | {} | {} | {:.4} | {:.1}% | {} | {:.4} | {:.4} | {} | {} | {:.1} | {} |",
                 r["faces"],
                 r["atlas"]["seam_edges"],
                 r["atlas"]["seam_length"].as_f64().unwrap_or(f64::NAN),
@@ -331,6 +332,7 @@ fn shared_meshes_sweep() {
                 r["iterations"],
                 r["converged"],
                 r["seconds"].as_f64().unwrap_or(f64::NAN),
+                r["boundary_self_intersections"],
             );
         }
     }
