@@ -1,0 +1,276 @@
+//! Stage 3: group faces into at most K connected regions of nearly equal normal.
+//!
+//! Region growing from seed faces taken in a seeded random order (so runs are reproducible
+//! with `--seed`): a neighbour joins when its normal is within θ of the region's area-weighted
+//! mean normal. Then the smallest region is merged into the adjacent region with the closest
+//! mean normal until at most K remain; a merge whose angle exceeds θ is skipped (as in the
+//! paper), and only when every remaining merge is above θ is θ relaxed (×1.25), because the
+//! caller asked for at most K regions. Finally regions that cannot become a proper polygon
+//! (fewer than three neighbouring regions on a closed surface: their whole boundary would lie
+//! on one or two plane–plane lines and collapse) are merged away too.
+
+use std::cmp::Reverse;
+use std::collections::{BTreeSet, BinaryHeap};
+
+use super::geom::{add, dot, normalize, scale, SplitMix, V3};
+use crate::mesh::{Topology, NO_FACE};
+
+/// Parameters of [`cluster_faces`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ClusterOptions {
+    /// Largest number of regions wanted.
+    pub k: usize,
+    /// θ in degrees.
+    pub angle_deg: f64,
+    pub seed: u64,
+}
+
+/// A partition of the faces.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Clustering {
+    /// Region of each face, 0..count.
+    pub face_cluster: Vec<u32>,
+    pub count: usize,
+    /// Regions after region growing, before merging.
+    pub grown: usize,
+    /// θ actually reached (degrees; larger than asked when merges had to be forced).
+    pub final_angle_deg: f64,
+}
+
+fn face_neighbors(topo: &Topology, f: usize) -> impl Iterator<Item = usize> + '_ {
+    topo.face_edges[f].iter().filter_map(move |&e| {
+        let [a, b] = topo.edge_faces[e as usize];
+        let g = if a as usize == f { b } else { a };
+        (g != NO_FACE).then_some(g as usize)
+    })
+}
+
+/// Region growing then merging; `normals` unit per face, `areas` per face.
+pub fn cluster_faces(
+    topo: &Topology,
+    normals: &[V3],
+    areas: &[f64],
+    opts: &ClusterOptions,
+) -> Clustering {
+    let nf = normals.len();
+    let mut order: Vec<usize> = (0..nf).collect();
+    let mut rng = SplitMix(opts.seed);
+    for i in (1..nf).rev() {
+        let j = rng.below(i + 1);
+        order.swap(i, j);
+    }
+    let cos_t = opts.angle_deg.to_radians().cos();
+    let mut label = vec![u32::MAX; nf];
+    let mut sums: Vec<V3> = Vec::new();
+    let mut area: Vec<f64> = Vec::new();
+    let mut queue = std::collections::VecDeque::new();
+    for &s in &order {
+        if label[s] != u32::MAX {
+            continue;
+        }
+        let c = sums.len() as u32;
+        label[s] = c;
+        let mut sum = scale(normals[s], areas[s]);
+        let mut a = areas[s];
+        queue.push_back(s);
+        while let Some(f) = queue.pop_front() {
+            for g in face_neighbors(topo, f) {
+                if label[g] != u32::MAX {
+                    continue;
+                }
+                let mean = normalize(sum).unwrap_or(normals[s]);
+                if dot(mean, normals[g]) >= cos_t {
+                    label[g] = c;
+                    sum = add(sum, scale(normals[g], areas[g]));
+                    a += areas[g];
+                    queue.push_back(g);
+                }
+            }
+        }
+        sums.push(sum);
+        area.push(a);
+    }
+    let grown = sums.len();
+
+    // Region adjacency and whether a region touches the mesh boundary.
+    let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); grown];
+    let mut open = vec![false; grown];
+    for (e, ef) in topo.edge_faces.iter().enumerate() {
+        let _ = e;
+        let a = label[ef[0] as usize];
+        if ef[1] == NO_FACE {
+            open[a as usize] = true;
+            continue;
+        }
+        let b = label[ef[1] as usize];
+        if a != b {
+            adj[a as usize].insert(b);
+            adj[b as usize].insert(a);
+        }
+    }
+    let mut parent: Vec<u32> = (0..grown as u32).collect();
+    let mut alive = vec![true; grown];
+    let mut n_alive = grown;
+    let mut angle = opts.angle_deg;
+    let key = |a: f64| a.to_bits();
+    let mut merge = |c: usize,
+                     into: usize,
+                     adj: &mut Vec<BTreeSet<u32>>,
+                     sums: &mut Vec<V3>,
+                     area: &mut Vec<f64>,
+                     alive: &mut Vec<bool>,
+                     open: &mut Vec<bool>| {
+        parent[c] = into as u32;
+        alive[c] = false;
+        sums[into] = add(sums[into], sums[c]);
+        area[into] += area[c];
+        open[into] |= open[c];
+        let nb = std::mem::take(&mut adj[c]);
+        for &m in &nb {
+            adj[m as usize].remove(&(c as u32));
+            if m as usize != into {
+                adj[m as usize].insert(into as u32);
+                adj[into].insert(m);
+            }
+        }
+        adj[into].remove(&(c as u32));
+        adj[into].remove(&(into as u32));
+    };
+    let closest = |c: usize, adj: &Vec<BTreeSet<u32>>, sums: &Vec<V3>| -> Option<(usize, f64)> {
+        let nc = normalize(sums[c]).unwrap_or([0.0; 3]);
+        adj[c]
+            .iter()
+            .map(|&m| {
+                let nm = normalize(sums[m as usize]).unwrap_or([0.0; 3]);
+                (m as usize, dot(nc, nm))
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+    };
+    while n_alive > opts.k.max(1) {
+        let cos_a = angle.to_radians().cos();
+        let mut heap: BinaryHeap<Reverse<(u64, usize)>> = (0..grown)
+            .filter(|&c| alive[c])
+            .map(|c| Reverse((key(area[c]), c)))
+            .collect();
+        let mut merged_any = false;
+        while n_alive > opts.k.max(1) {
+            let Some(Reverse((k, c))) = heap.pop() else {
+                break;
+            };
+            if !alive[c] || k != key(area[c]) {
+                continue;
+            }
+            let Some((m, cos)) = closest(c, &adj, &sums) else {
+                continue; // an isolated component: nothing to merge with
+            };
+            if cos < cos_a {
+                continue; // above θ: skipped, as in the paper
+            }
+            merge(c, m, &mut adj, &mut sums, &mut area, &mut alive, &mut open);
+            n_alive -= 1;
+            merged_any = true;
+            heap.push(Reverse((key(area[m]), m)));
+            for &nb in &adj[m] {
+                heap.push(Reverse((key(area[nb as usize]), nb as usize)));
+            }
+        }
+        if n_alive > opts.k.max(1) && !merged_any {
+            if angle >= 180.0 {
+                break; // only separate components remain
+            }
+            angle = (angle * 1.25).min(180.0);
+        }
+    }
+    // Regions that would collapse: closed regions with fewer than three neighbours.
+    loop {
+        let bad = (0..grown).find(|&c| alive[c] && !open[c] && adj[c].len() < 3 && !adj[c].is_empty());
+        let Some(c) = bad else { break };
+        let Some((m, _)) = closest(c, &adj, &sums) else {
+            break;
+        };
+        merge(c, m, &mut adj, &mut sums, &mut area, &mut alive, &mut open);
+    }
+    let find = |mut c: usize| {
+        while parent[c] as usize != c {
+            c = parent[c] as usize;
+        }
+        c
+    };
+    let mut remap = vec![u32::MAX; grown];
+    let mut count = 0u32;
+    let face_cluster = label
+        .iter()
+        .map(|&l| {
+            let r = find(l as usize);
+            if remap[r] == u32::MAX {
+                remap[r] = count;
+                count += 1;
+            }
+            remap[r]
+        })
+        .collect();
+    Clustering {
+        face_cluster,
+        count: count as usize,
+        grown,
+        final_angle_deg: angle,
+    }
+}
+
+/// Sorted distinct regions around each vertex.
+pub fn vertex_clusters(topo: &Topology, face_cluster: &[u32]) -> Vec<Vec<u32>> {
+    (0..topo.n_vertices as u32)
+        .map(|v| {
+            let mut c: Vec<u32> = topo
+                .vertex_faces(v)
+                .iter()
+                .map(|&f| face_cluster[f as usize])
+                .collect();
+            c.sort_unstable();
+            c.dedup();
+            c
+        })
+        .collect()
+}
+
+/// Reassigns faces whose three vertices all lie in another region too: such a face would have
+/// its corners on two planes at once, i.e. on their intersection line, and collapse. Moving it
+/// to that other region removes the shared constraint when a corner then leaves its old region.
+/// Returns how many faces were moved (bounded passes; whatever remains is reported by the
+/// planarity stage as degenerate).
+pub fn fix_collapsing_faces(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    face_cluster: &mut [u32],
+) -> usize {
+    let mut moved = 0;
+    for _ in 0..8 {
+        let vc = vertex_clusters(topo, face_cluster);
+        let mut changed = false;
+        for (f, face) in faces.iter().enumerate() {
+            let own = face_cluster[f];
+            let common = vc[face[0] as usize].iter().copied().find(|&c| {
+                c != own
+                    && vc[face[1] as usize].binary_search(&c).is_ok()
+                    && vc[face[2] as usize].binary_search(&c).is_ok()
+            });
+            if let Some(c) = common {
+                // Only move when the face touches c along an edge, so regions stay connected.
+                let touches = topo.face_edges[f].iter().any(|&e| {
+                    let [a, b] = topo.edge_faces[e as usize];
+                    let g = if a as usize == f { b } else { a };
+                    g != NO_FACE && face_cluster[g as usize] == c
+                });
+                if touches {
+                    face_cluster[f] = c;
+                    moved += 1;
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    moved
+}
