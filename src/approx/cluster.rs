@@ -274,3 +274,129 @@ pub fn fix_collapsing_faces(
     }
     moved
 }
+
+/// Merges each listed region into the adjacent region with the closest mean normal (`sums`
+/// are area-weighted normal sums per region). A region that receives a merge in this call is
+/// not merged itself, so chains of merges cannot cycle.
+pub fn merge_regions(topo: &Topology, face_cluster: &mut [u32], regions: &[u32], sums: &[V3]) {
+    let n = sums.len();
+    let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); n];
+    for ef in &topo.edge_faces {
+        if ef[1] == NO_FACE {
+            continue;
+        }
+        let (a, b) = (face_cluster[ef[0] as usize], face_cluster[ef[1] as usize]);
+        if a != b {
+            adj[a as usize].insert(b);
+            adj[b as usize].insert(a);
+        }
+    }
+    let mut target: Vec<u32> = (0..n as u32).collect();
+    let mut receives = vec![false; n];
+    let mut merged = vec![false; n];
+    for &c in regions {
+        let c = c as usize;
+        if receives[c] {
+            continue;
+        }
+        let nc = normalize(sums[c]).unwrap_or([0.0; 3]);
+        let best = adj[c]
+            .iter()
+            .filter(|&&m| !merged[m as usize])
+            .max_by(|&&a, &&b| {
+                let da = dot(nc, normalize(sums[a as usize]).unwrap_or([0.0; 3]));
+                let db = dot(nc, normalize(sums[b as usize]).unwrap_or([0.0; 3]));
+                da.total_cmp(&db).then(b.cmp(&a))
+            });
+        if let Some(&m) = best {
+            target[c] = m;
+            merged[c] = true;
+            receives[m as usize] = true;
+        }
+    }
+    for l in face_cluster.iter_mut() {
+        *l = target[*l as usize];
+    }
+}
+
+/// Smallest eigenvalue of Σ n nᵀ over the normals: how well the planes through a point pin it
+/// down (0 when the normals are coplanar and the planes meet in a line or not at all).
+fn pinning(normals: &[V3]) -> f64 {
+    let mut m = [[0.0; 3]; 3];
+    for n in normals {
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += n[i] * n[j];
+            }
+        }
+    }
+    let (vals, _) = crate::linalg::small::sym_eigen::<3>(&m);
+    vals[2]
+}
+
+/// Where three or more regions meet at a vertex, the vertex must go to their planes' common
+/// point; when their normals are nearly coplanar (e.g. three strips of a cylinder) that point
+/// is far away and the surface folds to reach it. Such triples cannot be realised, so the two
+/// edge-adjacent regions there with the closest normals are merged, until no vertex has
+/// λ_min(Σ n nᵀ) < `tau` (or `max_passes`). Returns the number of merges.
+pub fn merge_ill_conditioned_corners(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    face_cluster: &mut [u32],
+    normals: &[V3],
+    areas: &[f64],
+    tau: f64,
+    max_passes: usize,
+) -> usize {
+    let mut merges = 0;
+    for _ in 0..max_passes {
+        let n = face_cluster.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+        let mut sums = vec![[0.0; 3]; n];
+        for (f, &c) in face_cluster.iter().enumerate() {
+            sums[c as usize] = add(sums[c as usize], scale(normals[f], areas[f]));
+        }
+        let mean: Vec<V3> = sums.iter().map(|&s| normalize(s).unwrap_or([0.0; 3])).collect();
+        let vc = vertex_clusters(topo, face_cluster);
+        let mut target: Vec<u32> = (0..n as u32).collect();
+        let mut touched = vec![false; n];
+        let mut any = false;
+        for (v, cs) in vc.iter().enumerate() {
+            if cs.len() < 3 || cs.iter().any(|&c| touched[c as usize]) {
+                continue;
+            }
+            let ns: Vec<V3> = cs.iter().map(|&c| mean[c as usize]).collect();
+            if pinning(&ns) >= tau {
+                continue;
+            }
+            // Edge-adjacent region pairs around v.
+            let mut best: Option<(f64, u32, u32)> = None;
+            for &f in topo.vertex_faces(v as u32) {
+                for g in face_neighbors(topo, f as usize) {
+                    let (a, b) = (face_cluster[f as usize], face_cluster[g]);
+                    if a == b || !faces[g].contains(&(v as u32)) {
+                        continue;
+                    }
+                    let d = dot(mean[a as usize], mean[b as usize]);
+                    if best.is_none_or(|x| d > x.0) {
+                        best = Some((d, a.min(b), a.max(b)));
+                    }
+                }
+            }
+            if let Some((_, a, b)) = best {
+                target[b as usize] = a;
+                for &c in cs {
+                    touched[c as usize] = true;
+                }
+                any = true;
+                merges += 1;
+            }
+        }
+        if !any {
+            break;
+        }
+        for l in face_cluster.iter_mut() {
+            *l = target[*l as usize];
+        }
+    }
+    merges
+}

@@ -62,6 +62,15 @@ pub struct ApproxOptions {
     pub angle_deg: f64,
     pub normals: NormalL0Options,
     pub vertices: VertexUpdateOptions,
+    /// Lower θ (×0.75) while region growing gives fewer than K regions.
+    pub adapt_angle: bool,
+    /// Smallest θ tried by the adaptation.
+    pub min_angle_deg: f64,
+    /// Regions meeting at a vertex are merged while λ_min(Σ n nᵀ) of their normals is below
+    /// this (their common point would be far away; see `cluster::merge_ill_conditioned_corners`).
+    pub corner_pinning: f64,
+    /// Rounds of "merge the regions that still fold, planarize again".
+    pub max_merge_passes: usize,
     pub boundary: BoundaryL0Options,
 }
 
@@ -73,6 +82,10 @@ impl ApproxOptions {
             angle_deg: 20.0,
             normals: NormalL0Options::default(),
             vertices: VertexUpdateOptions::default(),
+            max_merge_passes: 0,
+            corner_pinning: 0.05,
+            adapt_angle: true,
+            min_angle_deg: 3.0,
             boundary: BoundaryL0Options::default(),
         }
     }
@@ -151,6 +164,10 @@ pub struct ApproxReport {
     pub chains_respaced: usize,
     /// Local Tutte repairs run to remove folds.
     pub fold_repairs: usize,
+    /// Passes that merged still-folding regions into a neighbour.
+    pub merge_passes: usize,
+    /// Region merges at corners whose planes are nearly dependent.
+    pub corner_merges: usize,
     pub vertices_on_4plus_planes: usize,
     pub unresolved_vertices_4plus: usize,
     pub unresolved_vertices_other: usize,
@@ -216,54 +233,109 @@ pub fn approximate(
     let (n1, a1) = face_normals_areas(&m1.positions, &m1.faces);
     // Cluster on the smoothed normals (piecewise constant); areas from the updated surface.
     let _ = n1;
-    let cl = cluster::cluster_faces(
-        topo,
-        &sm.normals,
-        &a1,
-        &ClusterOptions {
-            k: opts.k,
-            angle_deg: opts.angle_deg,
-            seed: opts.seed,
-        },
-    );
+    // θ is refined while region growing yields fewer than K regions: the budget K is then
+    // spent on flatter regions (smaller error, less to fold) instead of being left unused.
+    let mut angle = opts.angle_deg;
+    let cl = loop {
+        let cl = cluster::cluster_faces(
+            topo,
+            &sm.normals,
+            &a1,
+            &ClusterOptions {
+                k: opts.k,
+                angle_deg: angle,
+                seed: opts.seed,
+            },
+        );
+        if cl.grown >= opts.k || angle < opts.min_angle_deg || !opts.adapt_angle {
+            break cl;
+        }
+        angle *= 0.75;
+    };
     let mut face_cluster = cl.face_cluster.clone();
+    let corner_merges = cluster::merge_ill_conditioned_corners(
+        topo,
+        &mesh.faces,
+        &mut face_cluster,
+        &n0,
+        &a0,
+        opts.corner_pinning,
+        64,
+    );
     let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
     let n_clusters = renumber(&mut face_cluster);
     times.cluster = t.elapsed().as_secs_f64();
-
-    // Pull every region towards its mean normal before the constrained solve.
-    progress(Stage::Vertices);
-    let t = Instant::now();
-    let mut sums = vec![[0.0; 3]; n_clusters];
-    for (f, &c) in face_cluster.iter().enumerate() {
-        sums[c as usize] = geom::add(sums[c as usize], geom::scale(n0[f], a0[f]));
-    }
-    let target: Vec<V3> = face_cluster
-        .iter()
-        .enumerate()
-        .map(|(f, &c)| normalize(sums[c as usize]).unwrap_or(n0[f]))
-        .collect();
-    let p2 = vertex_update::update_vertices(&m1, topo, &target, &opts.vertices)?;
-    times.vertices += t.elapsed().as_secs_f64();
-
-    progress(Stage::Planarize);
-    let t = Instant::now();
-    let m2 = TriMesh {
-        positions: p2,
+    let m1 = TriMesh {
+        positions: m1.positions,
         faces: mesh.faces.clone(),
     };
-    let mut pl =
-        boundary_l0::planarize(&m2, topo, &face_cluster, n_clusters, diag, &opts.boundary)?;
-    let ut = untangle::untangle(
-        topo,
-        &mesh.faces,
-        &face_cluster,
-        &pl.planes,
-        &mesh.positions,
-        &mut pl.positions,
-        1e-12 * diag * diag,
-    )?;
-    times.planarize = t.elapsed().as_secs_f64();
+
+    // Pull every region towards its mean normal, then make it planar; a region that still
+    // folds (typically where three nearly dependent planes must share a corner) is merged into
+    // its closest neighbour and the pass repeated — the "merging" answer to configurations
+    // that exact planarity cannot realise without folds. The best pass is kept.
+    let min_area = 1e-12 * diag * diag;
+    let mut best: Option<(usize, Vec<u32>, usize, boundary_l0::Planarized, untangle::Untangled)> =
+        None;
+    let mut merge_passes = 0;
+    let mut n_clusters = n_clusters;
+    for pass in 0..=opts.max_merge_passes {
+        progress(Stage::Vertices);
+        let t = Instant::now();
+        let mut sums = vec![[0.0; 3]; n_clusters];
+        for (f, &c) in face_cluster.iter().enumerate() {
+            sums[c as usize] = geom::add(sums[c as usize], geom::scale(n0[f], a0[f]));
+        }
+        let target: Vec<V3> = face_cluster
+            .iter()
+            .enumerate()
+            .map(|(f, &c)| normalize(sums[c as usize]).unwrap_or(n0[f]))
+            .collect();
+        let p2 = vertex_update::update_vertices(&m1, topo, &target, &opts.vertices)?;
+        times.vertices += t.elapsed().as_secs_f64();
+
+        progress(Stage::Planarize);
+        let t = Instant::now();
+        let m2 = TriMesh {
+            positions: p2,
+            faces: mesh.faces.clone(),
+        };
+        let mut pl =
+            boundary_l0::planarize(&m2, topo, &face_cluster, n_clusters, diag, &opts.boundary)?;
+        let ut = untangle::untangle(
+            topo,
+            &mesh.faces,
+            &face_cluster,
+            &pl.planes,
+            &mesh.positions,
+            &mut pl.positions,
+            min_area,
+        )?;
+        times.planarize += t.elapsed().as_secs_f64();
+        let bad = untangle::bad_faces(&pl.positions, &mesh.faces, &face_cluster, &pl.planes, min_area);
+        let nbad = bad.len();
+        let better = best.as_ref().is_none_or(|b| nbad < b.0);
+        let mut bad_regions: Vec<u32> = bad.iter().map(|&f| face_cluster[f]).collect();
+        bad_regions.sort_unstable();
+        bad_regions.dedup();
+        let fc_now = face_cluster.clone();
+        if better {
+            best = Some((nbad, fc_now, n_clusters, pl, ut));
+        }
+        if nbad == 0 || pass == opts.max_merge_passes || n_clusters <= 1 {
+            break;
+        }
+        merge_passes += 1;
+        let t = Instant::now();
+        cluster::merge_regions(topo, &mut face_cluster, &bad_regions, &sums);
+        cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
+        n_clusters = renumber(&mut face_cluster);
+        times.cluster += t.elapsed().as_secs_f64();
+    }
+    // `best` is set in the first pass, which always runs.
+    let Some((_, face_cluster, n_clusters, pl, ut)) = best else {
+        return Err(ApproxError::BadInput("no planarization pass ran".into()));
+    };
 
     progress(Stage::Polygons);
     let t = Instant::now();
@@ -345,6 +417,8 @@ pub fn approximate(
         faces_reassigned: reassigned,
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
+        merge_passes,
+        corner_merges,
         vertices_on_4plus_planes: pl.vertices_on_4plus,
         unresolved_vertices_4plus: pl.unresolved_4plus,
         unresolved_vertices_other: pl.unresolved_other,

@@ -113,7 +113,7 @@ pub fn update_vertices(
         let a: CsMat<f64> = sys.t.to_csr();
         let b: Vec<Vec<f64>> = sys.rhs.to_vec();
         let mut cols: Vec<Vec<f64>> = (0..3).map(|k| x.iter().map(|p| p[k]).collect()).collect();
-        solve_spd(&a, &b, &mut cols, 1e-10)?;
+        solve_spd(&a, &b, &mut cols, 1e-9)?;
         for (i, p) in x.iter_mut().enumerate() {
             *p = [cols[0][i], cols[1][i], cols[2][i]];
         }
