@@ -4,15 +4,15 @@
 //! with `--seed`): a neighbour joins when its normal is within θ of the region's area-weighted
 //! mean normal. Then the smallest region is merged into the adjacent region with the closest
 //! mean normal until at most K remain; a merge whose angle exceeds θ is skipped (as in the
-//! paper), and only when every remaining merge is above θ is θ relaxed (×1.25), because the
-//! caller asked for at most K regions. Finally regions that cannot become a proper polygon
+//! paper), and only when every remaining merge is above θ is the single cheapest merge above θ
+//! made (the caller asked for at most K regions), after which smallest-first resumes. Finally regions that cannot become a proper polygon
 //! (fewer than three neighbouring regions on a closed surface: their whole boundary would lie
 //! on one or two plane–plane lines and collapse) are merged away too.
 
 use std::cmp::Reverse;
 use std::collections::{BTreeSet, BinaryHeap};
 
-use super::geom::{add, dot, normalize, scale, SplitMix, V3};
+use super::geom::{add, dot, fit_plane, norm, normalize, scale, solve_dense, Plane, SplitMix, V3};
 use crate::mesh::{Topology, NO_FACE};
 
 /// Parameters of [`cluster_faces`].
@@ -33,7 +33,7 @@ pub struct Clustering {
     pub count: usize,
     /// Regions after region growing, before merging.
     pub grown: usize,
-    /// θ actually reached (degrees; larger than asked when merges had to be forced).
+    /// Largest merge angle used (degrees; larger than θ when merges had to be forced).
     pub final_angle_deg: f64,
 }
 
@@ -175,10 +175,29 @@ pub fn cluster_faces(
             }
         }
         if n_alive > opts.k.max(1) && !merged_any {
-            if angle >= 180.0 {
-                break; // only separate components remain
+            // Every merge left is above θ: do the single cheapest one, cost = (1 − cos) × the
+            // smaller area (the normal deviation it introduces, weighted by how much surface
+            // must turn), then return to smallest-first under θ. Relaxing θ for all merges at
+            // once instead lets tiny regions swallow steep neighbours.
+            let mut best: Option<(f64, usize, usize, f64)> = None;
+            for c in (0..grown).filter(|&c| alive[c]) {
+                let nc = normalize(sums[c]).unwrap_or([0.0; 3]);
+                for &m in &adj[c] {
+                    let m = m as usize;
+                    let cos = dot(nc, normalize(sums[m]).unwrap_or([0.0; 3]));
+                    let cost = (1.0 - cos) * area[c].min(area[m]);
+                    if best.is_none_or(|b| cost < b.0) {
+                        best = Some((cost, c, m, cos));
+                    }
+                }
             }
-            angle = (angle * 1.25).min(180.0);
+            let Some((_, c, m, cos)) = best else {
+                break; // only separate components remain
+            };
+            let (small, big) = if area[c] <= area[m] { (c, m) } else { (m, c) };
+            merge(small, big, &mut adj, &mut sums, &mut area, &mut alive, &mut open);
+            n_alive -= 1;
+            angle = angle.max(cos.clamp(-1.0, 1.0).acos().to_degrees());
         }
     }
     // Regions that would collapse: closed regions with fewer than three neighbours.
@@ -319,33 +338,49 @@ pub fn merge_regions(topo: &Topology, face_cluster: &mut [u32], regions: &[u32],
     }
 }
 
-/// Smallest eigenvalue of Σ n nᵀ over the normals: how well the planes through a point pin it
-/// down (0 when the normals are coplanar and the planes meet in a line or not at all).
-fn pinning(normals: &[V3]) -> f64 {
-    let mut m = [[0.0; 3]; 3];
-    for n in normals {
+/// Distance from `x` to the point nearest to it that lies on all `planes` (least squares
+/// when they have no common point; `None` when they do not pin a point down at all).
+fn corner_reach(x: V3, planes: &[Plane]) -> Option<f64> {
+    let mut a = [0.0; 9];
+    let mut b = [0.0; 3];
+    for p in planes {
+        let r = p.signed_distance(x);
         for i in 0..3 {
+            b[i] -= p.n[i] * r;
             for j in 0..3 {
-                m[i][j] += n[i] * n[j];
+                a[i * 3 + j] += p.n[i] * p.n[j];
             }
         }
     }
-    let (vals, _) = crate::linalg::small::sym_eigen::<3>(&m);
-    vals[2]
+    // Relative pivot guard: a nearly singular system means a corner far away or at infinity.
+    let (vals, _) = crate::linalg::small::sym_eigen::<3>(&[
+        [a[0], a[1], a[2]],
+        [a[3], a[4], a[5]],
+        [a[6], a[7], a[8]],
+    ]);
+    if vals[2] < 1e-9 {
+        return None;
+    }
+    solve_dense(&mut a, &mut b, 3)?;
+    Some(norm(b))
 }
 
 /// Where three or more regions meet at a vertex, the vertex must go to their planes' common
-/// point; when their normals are nearly coplanar (e.g. three strips of a cylinder) that point
-/// is far away and the surface folds to reach it. Such triples cannot be realised, so the two
-/// edge-adjacent regions there with the closest normals are merged, until no vertex has
-/// λ_min(Σ n nᵀ) < `tau` (or `max_passes`). Returns the number of merges.
-pub fn merge_ill_conditioned_corners(
+/// point; when that point is far from the vertex (nearly dependent normals, e.g. three strips
+/// of a cylinder meeting in a T) the surface folds to reach it. Such corners cannot be
+/// realised, so the two edge-adjacent regions there with the closest normals are merged, until
+/// every corner's common point is within max(`max_reach`, `amplification` × the vertex's
+/// largest distance to those planes) of the vertex (planes fitted to the regions' vertices at
+/// `pos`), or `max_passes`. Returns the number of merges.
+pub fn merge_unreachable_corners(
     topo: &Topology,
     faces: &[[u32; 3]],
+    pos: &[V3],
     face_cluster: &mut [u32],
     normals: &[V3],
     areas: &[f64],
-    tau: f64,
+    max_reach: f64,
+    amplification: f64,
     max_passes: usize,
 ) -> usize {
     let mut merges = 0;
@@ -357,6 +392,15 @@ pub fn merge_ill_conditioned_corners(
         }
         let mean: Vec<V3> = sums.iter().map(|&s| normalize(s).unwrap_or([0.0; 3])).collect();
         let vc = vertex_clusters(topo, face_cluster);
+        let mut members: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (v, cs) in vc.iter().enumerate() {
+            for &c in cs {
+                members[c as usize].push(v);
+            }
+        }
+        let planes: Vec<Option<Plane>> = (0..n)
+            .map(|c| fit_plane(members[c].iter().map(|&v| (pos[v], 1.0)), mean[c]))
+            .collect();
         let mut target: Vec<u32> = (0..n as u32).collect();
         let mut touched = vec![false; n];
         let mut any = false;
@@ -364,8 +408,14 @@ pub fn merge_ill_conditioned_corners(
             if cs.len() < 3 || cs.iter().any(|&c| touched[c as usize]) {
                 continue;
             }
-            let ns: Vec<V3> = cs.iter().map(|&c| mean[c as usize]).collect();
-            if pinning(&ns) >= tau {
+            let ps: Vec<Plane> = cs.iter().filter_map(|&c| planes[c as usize]).collect();
+            // Far in absolute terms and far relative to how far the planes already are from
+            // the vertex (the amplification of a nearly dependent triple).
+            let resid = ps
+                .iter()
+                .map(|p| p.signed_distance(pos[v]).abs())
+                .fold(0.0, f64::max);
+            if corner_reach(pos[v], &ps).is_some_and(|d| d <= max_reach.max(amplification * resid)) {
                 continue;
             }
             // Edge-adjacent region pairs around v.

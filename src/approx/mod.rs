@@ -66,9 +66,11 @@ pub struct ApproxOptions {
     pub adapt_angle: bool,
     /// Smallest θ tried by the adaptation.
     pub min_angle_deg: f64,
-    /// Regions meeting at a vertex are merged while λ_min(Σ n nᵀ) of their normals is below
-    /// this (their common point would be far away; see `cluster::merge_ill_conditioned_corners`).
-    pub corner_pinning: f64,
+    /// Regions meeting at a vertex are merged while their planes' common point is farther than
+    /// this × bbox diagonal from it (see `cluster::merge_unreachable_corners`).
+    pub corner_reach_rel: f64,
+    /// … and farther than this × the vertex's distance to those planes.
+    pub corner_amplification: f64,
     /// Rounds of "merge the regions that still fold, planarize again".
     pub max_merge_passes: usize,
     pub boundary: BoundaryL0Options,
@@ -83,7 +85,8 @@ impl ApproxOptions {
             normals: NormalL0Options::default(),
             vertices: VertexUpdateOptions::default(),
             max_merge_passes: 0,
-            corner_pinning: 0.05,
+            corner_reach_rel: 0.02,
+            corner_amplification: 5.0,
             adapt_angle: true,
             min_angle_deg: 3.0,
             boundary: BoundaryL0Options::default(),
@@ -166,7 +169,7 @@ pub struct ApproxReport {
     pub fold_repairs: usize,
     /// Passes that merged still-folding regions into a neighbour.
     pub merge_passes: usize,
-    /// Region merges at corners whose planes are nearly dependent.
+    /// Region merges at corners whose planes meet too far away.
     pub corner_merges: usize,
     pub vertices_on_4plus_planes: usize,
     pub unresolved_vertices_4plus: usize,
@@ -253,13 +256,15 @@ pub fn approximate(
         angle *= 0.75;
     };
     let mut face_cluster = cl.face_cluster.clone();
-    let corner_merges = cluster::merge_ill_conditioned_corners(
+    let corner_merges = cluster::merge_unreachable_corners(
         topo,
         &mesh.faces,
+        &mesh.positions,
         &mut face_cluster,
         &n0,
         &a0,
-        opts.corner_pinning,
+        opts.corner_reach_rel * diag,
+        opts.corner_amplification,
         64,
     );
     let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
