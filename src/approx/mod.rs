@@ -143,6 +143,8 @@ pub struct ApproxReport {
     pub k_obtained: usize,
     /// Regions after region growing, before merging.
     pub regions_grown: usize,
+    /// Regions after merging down to K (before corner merges and fold checks).
+    pub regions_merged: usize,
     /// Merge angle reached (larger than asked when merges above θ were needed to reach K).
     pub final_angle_deg: f64,
     pub bbox_diagonal: f64,
@@ -408,6 +410,7 @@ pub fn approximate(
         k_requested: opts.k,
         k_obtained: n_clusters,
         regions_grown: cl.grown,
+        regions_merged: cl.count,
         final_angle_deg: cl.final_angle_deg,
         bbox_diagonal: diag,
         mean_input_distance: mean,
