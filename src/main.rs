@@ -227,8 +227,10 @@ fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     } else {
         let b = indicatif::ProgressBar::new(Stage::ALL.len() as u64);
         b.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} approx [{bar:20}] {pos}/{len} {msg}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template(
+                "{spinner} approx [{bar:20}] {pos}/{len} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         b.enable_steady_tick(std::time::Duration::from_millis(120));
         b

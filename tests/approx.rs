@@ -23,7 +23,10 @@ use tempdir::TempDir;
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     }
 }
@@ -135,10 +138,20 @@ fn l0_normals_of_a_noisy_cube_become_the_six_axis_normals() {
         .iter()
         .map(|&n| dot(n, true_normal(side_of(n))))
         .fold(1.0, f64::min);
-    assert!(worst_in < 0.999, "the noise must tilt some normals ({worst_in})");
-    assert!(worst_out > 0.999, "smoothed normals stay off-axis: cos {worst_out}");
+    assert!(
+        worst_in < 0.999,
+        "the noise must tilt some normals ({worst_in})"
+    );
+    assert!(
+        worst_out > 0.999,
+        "smoothed normals stay off-axis: cos {worst_out}"
+    );
     // The 12 cube edges carry 12·6 mesh edges; the creases must survive the L0 smoothing.
-    assert!(r.crease_edges >= 12 * 6, "only {} crease edges", r.crease_edges);
+    assert!(
+        r.crease_edges >= 12 * 6,
+        "only {} crease edges",
+        r.crease_edges
+    );
     assert!(r.rounds > 1);
 }
 
@@ -206,7 +219,10 @@ fn clustering_finds_six_sides_of_a_cube_and_one_region_of_a_grid() {
         angle_deg: 20.0,
         seed: 9,
     };
-    assert_eq!(cluster_faces(&t, &n0, &a0, &opts), cluster_faces(&t, &n0, &a0, &opts));
+    assert_eq!(
+        cluster_faces(&t, &n0, &a0, &opts),
+        cluster_faces(&t, &n0, &a0, &opts)
+    );
 
     let g = noisy_grid(6, 0.002, 5);
     let tg = topo(&g);
@@ -232,7 +248,11 @@ fn planarize_makes_each_cube_side_exactly_planar_on_the_axis_planes() {
     let fc: Vec<u32> = n0.iter().map(|&n| side_of(n) as u32).collect();
     let diag = bbox_diagonal(&m);
     let p = planarize(&m, &t, &fc, 6, diag, &BoundaryL0Options::default()).unwrap();
-    assert!(p.max_violation <= 1e-7 * diag, "violation {}", p.max_violation);
+    assert!(
+        p.max_violation <= 1e-7 * diag,
+        "violation {}",
+        p.max_violation
+    );
     for (s, pl) in p.planes.iter().enumerate() {
         let pl = pl.expect("every side has vertices");
         assert!(dot(pl.n, true_normal(s)) > 0.999, "side {s}: {:?}", pl.n);
@@ -354,7 +374,10 @@ fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
     );
     let run = |extra: &[&Path], flags: &[&str]| {
         let mut c = Command::new(env!("CARGO_BIN_EXE_foldfree"));
-        c.arg("approx").arg(&input).args(["-k", "10", "-q", "-o"]).arg(&out);
+        c.arg("approx")
+            .arg(&input)
+            .args(["-k", "10", "-q", "-o"])
+            .arg(&out);
         for (i, p) in extra.iter().enumerate() {
             c.arg(["--polygons", "--report"][i]).arg(p);
         }
@@ -365,11 +388,16 @@ fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (v, f) = obj_counts(&out);
     assert_eq!(v.len(), m.positions.len());
-    let faces: Vec<Vec<usize>> = m.faces.iter().map(|f| f.iter().map(|&i| i as usize + 1).collect()).collect();
+    let faces: Vec<Vec<usize>> = m
+        .faces
+        .iter()
+        .map(|f| f.iter().map(|&i| i as usize + 1).collect())
+        .collect();
     assert_eq!(f, faces, "same face order");
     let (pv, pf) = obj_counts(&poly);
     assert_eq!((pv.len(), pf.len()), (8, 6));
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
     assert_eq!(r["k_obtained"], 6);
     assert_eq!(r["k_requested"], 10);
     assert!(r["mean_input_distance"].as_f64().unwrap() > 0.0);
@@ -391,7 +419,12 @@ fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
         .arg(&out2)
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     assert!(!out2.exists());
     // K = 0 is a usage error.
     let o = Command::new(env!("CARGO_BIN_EXE_foldfree"))

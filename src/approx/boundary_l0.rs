@@ -273,7 +273,9 @@ pub fn planarize(
             .filter_map(|&c| planes[c as usize].map(|p| p.signed_distance(x[v]).abs()))
             .fold(0.0, f64::max)
     };
-    let mut worst = (0..n).map(|v| violation(&x, &planes, v)).fold(0.0, f64::max);
+    let mut worst = (0..n)
+        .map(|v| violation(&x, &planes, v))
+        .fold(0.0, f64::max);
     let mut ps: Vec<Plane> = Vec::new();
     while worst > tol && rounds < opts.max_projection_rounds {
         rounds += 1;
@@ -288,9 +290,13 @@ pub fn planarize(
             }
         }
         planes = fit_planes(&x, &mesh.faces, face_cluster, &members);
-        worst = (0..n).map(|v| violation(&x, &planes, v)).fold(0.0, f64::max);
+        worst = (0..n)
+            .map(|v| violation(&x, &planes, v))
+            .fold(0.0, f64::max);
     }
-    let over: Vec<usize> = (0..n).filter(|&v| violation(&x, &planes, v) > tol).collect();
+    let over: Vec<usize> = (0..n)
+        .filter(|&v| violation(&x, &planes, v) > tol)
+        .collect();
     let unresolved_4plus = over.iter().filter(|&&v| vc[v].len() > 3).count();
     Ok(Planarized {
         max_violation: worst,

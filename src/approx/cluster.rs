@@ -186,7 +186,7 @@ pub fn cluster_faces(
                     let m = m as usize;
                     let cos = dot(nc, normalize(sums[m]).unwrap_or([0.0; 3]));
                     let cost = (1.0 - cos) * area[c].min(area[m]);
-                    if best.is_none_or(|b| cost < b.0) {
+                    if best.map_or(true, |b| cost < b.0) {
                         best = Some((cost, c, m, cos));
                     }
                 }
@@ -195,14 +195,17 @@ pub fn cluster_faces(
                 break; // only separate components remain
             };
             let (small, big) = if area[c] <= area[m] { (c, m) } else { (m, c) };
-            merge(small, big, &mut adj, &mut sums, &mut area, &mut alive, &mut open);
+            merge(
+                small, big, &mut adj, &mut sums, &mut area, &mut alive, &mut open,
+            );
             n_alive -= 1;
             angle = angle.max(cos.clamp(-1.0, 1.0).acos().to_degrees());
         }
     }
     // Regions that would collapse: closed regions with fewer than three neighbours.
     loop {
-        let bad = (0..grown).find(|&c| alive[c] && !open[c] && adj[c].len() < 3 && !adj[c].is_empty());
+        let bad =
+            (0..grown).find(|&c| alive[c] && !open[c] && adj[c].len() < 3 && !adj[c].is_empty());
         let Some(c) = bad else { break };
         let Some((m, _)) = closest(c, &adj, &sums) else {
             break;
@@ -385,12 +388,19 @@ pub fn merge_unreachable_corners(
 ) -> usize {
     let mut merges = 0;
     for _ in 0..max_passes {
-        let n = face_cluster.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+        let n = face_cluster
+            .iter()
+            .map(|&c| c as usize + 1)
+            .max()
+            .unwrap_or(0);
         let mut sums = vec![[0.0; 3]; n];
         for (f, &c) in face_cluster.iter().enumerate() {
             sums[c as usize] = add(sums[c as usize], scale(normals[f], areas[f]));
         }
-        let mean: Vec<V3> = sums.iter().map(|&s| normalize(s).unwrap_or([0.0; 3])).collect();
+        let mean: Vec<V3> = sums
+            .iter()
+            .map(|&s| normalize(s).unwrap_or([0.0; 3]))
+            .collect();
         let vc = vertex_clusters(topo, face_cluster);
         let mut members: Vec<Vec<usize>> = vec![Vec::new(); n];
         for (v, cs) in vc.iter().enumerate() {
@@ -415,7 +425,8 @@ pub fn merge_unreachable_corners(
                 .iter()
                 .map(|p| p.signed_distance(pos[v]).abs())
                 .fold(0.0, f64::max);
-            if corner_reach(pos[v], &ps).is_some_and(|d| d <= max_reach.max(amplification * resid)) {
+            if corner_reach(pos[v], &ps).is_some_and(|d| d <= max_reach.max(amplification * resid))
+            {
                 continue;
             }
             // Edge-adjacent region pairs around v.
@@ -427,7 +438,7 @@ pub fn merge_unreachable_corners(
                         continue;
                     }
                     let d = dot(mean[a as usize], mean[b as usize]);
-                    if best.is_none_or(|x| d > x.0) {
+                    if best.map_or(true, |x| d > x.0) {
                         best = Some((d, a.min(b), a.max(b)));
                     }
                 }

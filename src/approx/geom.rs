@@ -156,7 +156,8 @@ pub fn mean_edge_length(pos: &[V3], edges: &[[u32; 2]]) -> f64 {
 /// pivoting; `None` when a pivot vanishes.
 pub fn solve_dense(a: &mut [f64], b: &mut [f64], n: usize) -> Option<()> {
     for col in 0..n {
-        let piv = (col..n).max_by(|&i, &j| a[i * n + col].abs().total_cmp(&a[j * n + col].abs()))?;
+        let piv =
+            (col..n).max_by(|&i, &j| a[i * n + col].abs().total_cmp(&a[j * n + col].abs()))?;
         if a[piv * n + col].abs() < 1e-300 {
             return None;
         }

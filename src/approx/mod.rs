@@ -282,8 +282,13 @@ pub fn approximate(
     // its closest neighbour and the pass repeated — the "merging" answer to configurations
     // that exact planarity cannot realise without folds. The best pass is kept.
     let min_area = 1e-12 * diag * diag;
-    let mut best: Option<(usize, Vec<u32>, usize, boundary_l0::Planarized, untangle::Untangled)> =
-        None;
+    let mut best: Option<(
+        usize,
+        Vec<u32>,
+        usize,
+        boundary_l0::Planarized,
+        untangle::Untangled,
+    )> = None;
     let mut merge_passes = 0;
     let mut n_clusters = n_clusters;
     for pass in 0..=opts.max_merge_passes {
@@ -319,9 +324,15 @@ pub fn approximate(
             min_area,
         )?;
         times.planarize += t.elapsed().as_secs_f64();
-        let bad = untangle::bad_faces(&pl.positions, &mesh.faces, &face_cluster, &pl.planes, min_area);
+        let bad = untangle::bad_faces(
+            &pl.positions,
+            &mesh.faces,
+            &face_cluster,
+            &pl.planes,
+            min_area,
+        );
         let nbad = bad.len();
-        let better = best.as_ref().is_none_or(|b| nbad < b.0);
+        let better = best.as_ref().map_or(true, |b| nbad < b.0);
         let mut bad_regions: Vec<u32> = bad.iter().map(|&f| face_cluster[f]).collect();
         bad_regions.sort_unstable();
         bad_regions.dedup();

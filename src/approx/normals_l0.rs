@@ -94,7 +94,10 @@ pub fn smooth_normals(
 
     // Column-major copies: x[k][f] = N_f[k].
     let mut n: Vec<Vec<f64>> = (0..3).map(|k| n0.iter().map(|v| v[k]).collect()).collect();
-    let rhs0: Vec<Vec<f64>> = n.iter().map(|c| c.iter().map(|v| 2.0 * v).collect()).collect();
+    let rhs0: Vec<Vec<f64>> = n
+        .iter()
+        .map(|c| c.iter().map(|v| 2.0 * v).collect())
+        .collect();
     let mut p = vec![[0.0; 3]; ne];
     let mut lam = vec![[0.0; 3]; ne];
     let mut beta = opts.beta0_rel * opts.alpha;
@@ -147,4 +150,3 @@ pub fn smooth_normals(
         rounds,
     })
 }
-

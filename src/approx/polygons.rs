@@ -85,10 +85,7 @@ fn region_loops(topo: &Topology, faces: &[[u32; 3]], fc: &[u32], n: usize) -> Ve
                 while next.get(&s).is_some_and(|v| !v.is_empty()) {
                     let mut lp = vec![s];
                     let mut cur = s;
-                    loop {
-                        let Some(b) = next.get_mut(&cur).and_then(|v| v.pop()) else {
-                            break;
-                        };
+                    while let Some(b) = next.get_mut(&cur).and_then(|v| v.pop()) {
                         if b == s {
                             break;
                         }
@@ -116,7 +113,7 @@ pub fn ear_clip(p: &[[f64; 2]]) -> Vec<[usize; 3]> {
         for i in 0..m {
             let (a, b, c) = (idx[(i + m - 1) % m], idx[i], idx[(i + 1) % m]);
             let o = orient(p[a], p[b], p[c]);
-            if best.is_none_or(|(_, bo)| o > bo) {
+            if best.map_or(true, |(_, bo)| o > bo) {
                 best = Some((i, o));
             }
             if o <= 0.0 {

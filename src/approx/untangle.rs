@@ -54,8 +54,7 @@ pub fn untangle(
             badj[b as usize].push(a);
         }
     }
-    let is_chain =
-        |v: usize| vc[v].len() == 2 && !on_border[v] && badj[v].len() == 2;
+    let is_chain = |v: usize| vc[v].len() == 2 && !on_border[v] && badj[v].len() == 2;
     let mut out = Untangled::default();
     let mut done = vec![false; n];
     for a in 0..n {
@@ -137,11 +136,7 @@ pub fn untangle(
             frontier = next;
         }
         let free: Vec<usize> = (0..n)
-            .filter(|&v| {
-                ring[v] < radius
-                    && vc[v].len() == 1
-                    && !on_border[v]
-            })
+            .filter(|&v| ring[v] < radius && vc[v].len() == 1 && !on_border[v])
             .collect();
         // Keep a repair only when it leaves fewer bad faces (a non-convex patch can add folds).
         if !free.is_empty() {
