@@ -461,3 +461,51 @@ pub fn merge_unreachable_corners(
     }
     merges
 }
+
+/// Merges closed regions with fewer than three neighbouring regions (their whole boundary would
+/// lie on one or two plane–plane lines and collapse) into their closest neighbour, at face
+/// level, until none is left; needed again after merges made by later steps. Returns the
+/// number of merges.
+pub fn merge_collapsing_regions(
+    topo: &Topology,
+    face_cluster: &mut [u32],
+    normals: &[V3],
+    areas: &[f64],
+) -> usize {
+    let mut merges = 0;
+    for _ in 0..64 {
+        let n = face_cluster
+            .iter()
+            .map(|&c| c as usize + 1)
+            .max()
+            .unwrap_or(0);
+        let mut sums = vec![[0.0; 3]; n];
+        for (f, &c) in face_cluster.iter().enumerate() {
+            sums[c as usize] = add(sums[c as usize], scale(normals[f], areas[f]));
+        }
+        let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); n];
+        let mut open = vec![false; n];
+        for ef in &topo.edge_faces {
+            let a = face_cluster[ef[0] as usize];
+            if ef[1] == NO_FACE {
+                open[a as usize] = true;
+                continue;
+            }
+            let b = face_cluster[ef[1] as usize];
+            if a != b {
+                adj[a as usize].insert(b);
+                adj[b as usize].insert(a);
+            }
+        }
+        let bad: Vec<u32> = (0..n)
+            .filter(|&c| !open[c] && !adj[c].is_empty() && adj[c].len() < 3)
+            .map(|c| c as u32)
+            .collect();
+        if bad.is_empty() {
+            break;
+        }
+        merges += bad.len();
+        merge_regions(topo, face_cluster, &bad, &sums);
+    }
+    merges
+}

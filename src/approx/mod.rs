@@ -171,7 +171,8 @@ pub struct ApproxReport {
     pub fold_repairs: usize,
     /// Passes that merged still-folding regions into a neighbour.
     pub merge_passes: usize,
-    /// Region merges at corners whose planes meet too far away.
+    /// Region merges at corners whose planes meet too far away, and of closed regions left
+    /// with fewer than three neighbours by them.
     pub corner_merges: usize,
     pub vertices_on_4plus_planes: usize,
     pub unresolved_vertices_4plus: usize,
@@ -269,6 +270,7 @@ pub fn approximate(
         opts.corner_amplification,
         64,
     );
+    let collapse_merges = cluster::merge_collapsing_regions(topo, &mut face_cluster, &n0, &a0);
     let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
     let n_clusters = renumber(&mut face_cluster);
     times.cluster = t.elapsed().as_secs_f64();
@@ -437,7 +439,7 @@ pub fn approximate(
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
         merge_passes,
-        corner_merges,
+        corner_merges: corner_merges + collapse_merges,
         vertices_on_4plus_planes: pl.vertices_on_4plus,
         unresolved_vertices_4plus: pl.unresolved_4plus,
         unresolved_vertices_other: pl.unresolved_other,
