@@ -203,3 +203,57 @@ impl SplitMix {
         (self.next_u64() % n.max(1) as u64) as usize
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn minimal_rotation_maps_from_onto_to_and_keeps_lengths() {
+        let from = normalize([1.0, 2.0, 3.0]).unwrap_or([0.0; 3]);
+        for to in [[0.0, 0.0, 1.0], [-1.0, 0.5, 0.2], scale(from, -1.0)] {
+            let to = normalize(to).unwrap_or([0.0; 3]);
+            let r = rotate_min(from, to, from);
+            assert!(norm(sub(r, to)) < 1e-12, "{r:?} vs {to:?}");
+            let v = [0.3, -0.7, 2.0];
+            assert!((norm(rotate_min(from, to, v)) - norm(v)).abs() < 1e-12);
+        }
+        // The axis from × to is left alone (minimal rotation).
+        let (a, b) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+        assert!(norm(sub(rotate_min(a, b, [0.0, 0.0, 1.0]), [0.0, 0.0, 1.0])) < 1e-12);
+    }
+
+    #[test]
+    fn plane_fit_recovers_a_tilted_plane_and_orients_it() {
+        let n = normalize([1.0, -2.0, 0.5]).unwrap_or([0.0; 3]);
+        let u = normalize(cross(n, [0.0, 0.0, 1.0])).unwrap_or([0.0; 3]);
+        let w = cross(n, u);
+        let pts: Vec<(V3, f64)> = (0..20)
+            .map(|i| {
+                let (a, b) = ((i % 5) as f64, (i / 5) as f64 * 0.7);
+                (add(add(scale(u, a), scale(w, b)), scale(n, -3.0)), 1.0)
+            })
+            .collect();
+        let p = fit_plane(pts.iter().copied(), scale(n, -1.0)).unwrap();
+        assert!((dot(p.n, n) + 1.0).abs() < 1e-10, "oriented along the hint");
+        for (q, _) in &pts {
+            assert!(p.signed_distance(*q).abs() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn dense_solve_matches_a_known_solution_and_reports_singular() {
+        let mut a = [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let x = [1.0, -2.0, 0.5];
+        let mut b = [0.0; 3];
+        for i in 0..3 {
+            b[i] = (0..3).map(|j| a[i * 3 + j] * x[j]).sum();
+        }
+        assert!(solve_dense(&mut a, &mut b, 3).is_some());
+        for i in 0..3 {
+            assert!((b[i] - x[i]).abs() < 1e-12);
+        }
+        let mut s = [1.0, 2.0, 2.0, 4.0];
+        assert!(solve_dense(&mut s, &mut [1.0, 1.0], 2).is_none());
+    }
+}
