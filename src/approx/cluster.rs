@@ -509,3 +509,31 @@ pub fn merge_collapsing_regions(
     }
     merges
 }
+
+/// Majority filter on region boundaries: a face with two of its three edge-neighbours in one
+/// other region joins that region. Region growing leaves jagged, one-face-wide spikes along
+/// boundaries; every spike face has all three corners on region boundaries, i.e. on plane–plane
+/// lines, and folds or collapses once the regions are made planar. Returns faces moved.
+pub fn smooth_boundaries(topo: &Topology, face_cluster: &mut [u32], max_passes: usize) -> usize {
+    let mut moved = 0;
+    for _ in 0..max_passes {
+        let mut changed = false;
+        for f in 0..face_cluster.len() {
+            let own = face_cluster[f];
+            let nb: Vec<u32> = face_neighbors(topo, f).map(|g| face_cluster[g]).collect();
+            let other = nb
+                .iter()
+                .copied()
+                .find(|&c| c != own && nb.iter().filter(|&&d| d == c).count() >= 2);
+            if let Some(c) = other {
+                face_cluster[f] = c;
+                moved += 1;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    moved
+}

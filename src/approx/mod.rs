@@ -62,6 +62,8 @@ pub struct ApproxOptions {
     pub angle_deg: f64,
     pub normals: NormalL0Options,
     pub vertices: VertexUpdateOptions,
+    /// Majority filter on region boundaries before planarity (see `cluster::smooth_boundaries`).
+    pub smooth_boundaries: bool,
     /// Lower θ (×0.75) while region growing gives fewer than K regions.
     pub adapt_angle: bool,
     /// Smallest θ tried by the adaptation.
@@ -88,6 +90,7 @@ impl ApproxOptions {
             corner_reach_rel: 0.02,
             corner_amplification: 5.0,
             adapt_angle: true,
+            smooth_boundaries: true,
             min_angle_deg: 3.0,
             boundary: BoundaryL0Options::default(),
         }
@@ -163,7 +166,8 @@ pub struct ApproxReport {
     pub flipped_vs_input: usize,
     /// Output faces with area ≤ 1e-12·diag².
     pub degenerate_faces: usize,
-    /// Faces moved to a neighbouring region because all three corners were shared with it.
+    /// Faces moved to a neighbouring region: all three corners shared with it, or two of
+    /// three edge-neighbours in it (boundary smoothing).
     pub faces_reassigned: usize,
     /// Two-region boundary chains re-spaced monotonically along their line.
     pub chains_respaced: usize,
@@ -259,6 +263,11 @@ pub fn approximate(
         angle *= 0.75;
     };
     let mut face_cluster = cl.face_cluster.clone();
+    let smoothed = if opts.smooth_boundaries {
+        cluster::smooth_boundaries(topo, &mut face_cluster, 16)
+    } else {
+        0
+    };
     let corner_merges = cluster::merge_unreachable_corners(
         topo,
         &mesh.faces,
@@ -435,7 +444,7 @@ pub fn approximate(
         flipped_faces: flipped,
         flipped_vs_input: flipped_in,
         degenerate_faces: degenerate,
-        faces_reassigned: reassigned,
+        faces_reassigned: reassigned + smoothed,
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
         merge_passes,
