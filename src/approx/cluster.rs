@@ -95,8 +95,7 @@ pub fn cluster_faces(
     // Region adjacency and whether a region touches the mesh boundary.
     let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); grown];
     let mut open = vec![false; grown];
-    for (e, ef) in topo.edge_faces.iter().enumerate() {
-        let _ = e;
+    for ef in &topo.edge_faces {
         let a = label[ef[0] as usize];
         if ef[1] == NO_FACE {
             open[a as usize] = true;

@@ -240,9 +240,8 @@ pub fn approximate(
         positions: p1,
         faces: mesh.faces.clone(),
     };
-    let (n1, a1) = face_normals_areas(&m1.positions, &m1.faces);
     // Cluster on the smoothed normals (piecewise constant); areas from the updated surface.
-    let _ = n1;
+    let (_, a1) = face_normals_areas(&m1.positions, &m1.faces);
     // θ is refined while region growing yields fewer than K regions: the budget K is then
     // spent on flatter regions (smaller error, less to fold) instead of being left unused.
     let mut angle = opts.angle_deg;
