@@ -5,6 +5,7 @@
 //!
 //! Only [`gpu`] contains `unsafe` code; every other module forbids it.
 
+pub mod approx;
 pub mod bench;
 pub mod embed;
 pub mod error;

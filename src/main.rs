@@ -40,6 +40,8 @@ enum Command {
     /// Render a UV-mapped OBJ (with `vt`) textured with a checkerboard through its UVs, to PNG
     /// (offscreen Vulkan graphics).
     Render(RenderArgs),
+    /// Approximate a triangle mesh by at most K planar polygons (Hu & Zhang 2017).
+    Approx(ApproxArgs),
     /// Time `param` over meshes, energies and backends; prints a Markdown table.
     Bench {
         /// Input OBJ files (disk topology).
@@ -205,6 +207,105 @@ struct ParamArgs {
     /// Write the convergence plot as PNG.
     #[arg(long, value_name = "PATH")]
     plot_png: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+struct ApproxArgs {
+    /// Input OBJ (manifold, consistently oriented triangles).
+    input: PathBuf,
+    /// Largest number of planar regions.
+    #[arg(short, value_name = "K")]
+    k: usize,
+    /// Output OBJ: the input's v and f order with moved vertices (each region planar).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Also write one planar polygon per region (holes bridged in) to this OBJ.
+    #[arg(long, value_name = "POLY.obj")]
+    polygons: Option<PathBuf>,
+    /// Write the polygons as triangles (ear clipping in each plane).
+    #[arg(long)]
+    triangulate: bool,
+    /// Seed of the region-growing order.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Region-growing / merge angle in degrees.
+    #[arg(long, default_value_t = 20.0)]
+    angle: f64,
+    /// Write the JSON report here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// No progress display.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
+    use foldfree::approx::{self, ApproxOptions, Stage};
+    if args.output == args.input || args.polygons.as_ref() == Some(&args.input) {
+        return Err(foldfree::Error::Usage(
+            "refusing to overwrite the input".into(),
+        ));
+    }
+    if args.k == 0 || !(args.angle > 0.0 && args.angle <= 180.0) {
+        return Err(foldfree::Error::Usage(
+            "-k must be ≥ 1 and --angle in (0, 180]".into(),
+        ));
+    }
+    let (m, topo, _) = mesh::load(&args.input, &mesh::ValidateOptions::default())?;
+    let mut opts = ApproxOptions::new(args.k);
+    opts.seed = args.seed;
+    opts.angle_deg = args.angle;
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let b = indicatif::ProgressBar::new(Stage::ALL.len() as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} approx [{bar:20}] {pos}/{len} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b.enable_steady_tick(std::time::Duration::from_millis(120));
+        b
+    };
+    let out = approx::approximate(&m, &topo, &opts, &mut |s| {
+        let i = Stage::ALL.iter().position(|&x| x == s).unwrap_or(0);
+        bar.set_position(i as u64);
+        bar.set_message(s.name());
+    });
+    bar.finish_and_clear();
+    let out = out?;
+    let write = |path: &PathBuf, text: String| {
+        mesh::write_atomic(path, text.as_bytes()).map_err(|source| foldfree::Error::Io {
+            path: path.clone(),
+            source,
+        })
+    };
+    write(&args.output, approx::mesh_obj(&out.positions, &m.faces))?;
+    if let Some(p) = &args.polygons {
+        write(p, out.polygons.to_obj(args.triangulate))?;
+    }
+    let r = &out.report;
+    if let Some(p) = &args.report {
+        write(p, serde_json::to_string_pretty(r).unwrap_or_default())?;
+    }
+    eprintln!(
+        "foldfree approx: {} faces → {} regions (K = {}), {} polygons, {} corners, {:.2} s",
+        r.faces, r.k_obtained, r.k_requested, r.polygons, r.corners, r.seconds.total
+    );
+    eprintln!(
+        "  input→plane distance mean {:.4e} ({:.2e}·diag), max {:.4e}; planarity of output {:.2e}·diag; flipped {}, degenerate {}",
+        r.mean_input_distance,
+        r.mean_input_distance_rel,
+        r.max_input_distance,
+        r.max_planarity_deviation_rel,
+        r.flipped_faces,
+        r.degenerate_faces
+    );
+    for n in &r.notes {
+        eprintln!("  note: {n}");
+    }
+    Ok(())
 }
 
 #[derive(clap::Args)]
@@ -625,6 +726,7 @@ fn main() -> ExitCode {
         Command::Param(args) => run_param(*args),
         Command::Devices => run_devices(),
         Command::Render(args) => run_render(args),
+        Command::Approx(args) => run_approx(args),
         Command::Bench {
             meshes,
             energy,

@@ -1,0 +1,259 @@
+//! Small 3-vector and plane helpers shared by the approximation stages (kept local so the
+//! stages read as formulas, not as calls into a linear-algebra crate).
+
+use crate::linalg::small::sym_eigen;
+use crate::mesh::TriMesh;
+
+pub type V3 = [f64; 3];
+
+pub fn add(a: V3, b: V3) -> V3 {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+pub fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+pub fn scale(a: V3, s: f64) -> V3 {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+pub fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+pub fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+pub fn norm(a: V3) -> f64 {
+    dot(a, a).sqrt()
+}
+/// Unit vector along `a`, or `None` for a (numerically) zero vector.
+pub fn normalize(a: V3) -> Option<V3> {
+    let l = norm(a);
+    (l > 0.0 && l.is_finite()).then(|| scale(a, 1.0 / l))
+}
+
+/// Area-scaled normal (half the cross product) of face `f` at `pos`.
+pub fn face_area_normal(pos: &[V3], f: [u32; 3]) -> V3 {
+    let [a, b, c] = f.map(|i| pos[i as usize]);
+    scale(cross(sub(b, a), sub(c, a)), 0.5)
+}
+
+/// Unit normals and areas of all faces; a zero-area face gets normal 0 (callers that need a
+/// direction validated the mesh first).
+pub fn face_normals_areas(pos: &[V3], faces: &[[u32; 3]]) -> (Vec<V3>, Vec<f64>) {
+    faces
+        .iter()
+        .map(|&f| {
+            let an = face_area_normal(pos, f);
+            let a = norm(an);
+            (normalize(an).unwrap_or([0.0; 3]), a)
+        })
+        .unzip()
+}
+
+/// Applies the minimal rotation taking unit `from` onto unit `to` to `v` (Rodrigues without
+/// trigonometry: R v = c·v + w×v + w(w·v)/(1+c), w = from×to, c = from·to). Opposite vectors
+/// have no unique minimal rotation; any half-turn about an axis ⟂ `from` is used.
+pub fn rotate_min(from: V3, to: V3, v: V3) -> V3 {
+    let c = dot(from, to);
+    if c > -1.0 + 1e-9 {
+        let w = cross(from, to);
+        add(
+            add(scale(v, c), cross(w, v)),
+            scale(w, dot(w, v) / (1.0 + c)),
+        )
+    } else {
+        let helper = if from[0].abs() < 0.9 {
+            [1.0, 0.0, 0.0]
+        } else {
+            [0.0, 1.0, 0.0]
+        };
+        let k = normalize(cross(from, helper)).unwrap_or([0.0, 0.0, 1.0]);
+        sub(scale(k, 2.0 * dot(k, v)), v)
+    }
+}
+
+/// A plane n·x + d = 0 with unit n.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Plane {
+    pub n: V3,
+    pub d: f64,
+}
+
+impl Plane {
+    pub fn signed_distance(&self, p: V3) -> f64 {
+        dot(self.n, p) + self.d
+    }
+}
+
+/// Least-squares plane through weighted points (PCA: normal = eigenvector of the smallest
+/// eigenvalue of the covariance), oriented along `orient` so that its normal agrees with the
+/// faces it stands for. `None` when there are no points or no weight.
+pub fn fit_plane(points: impl Iterator<Item = (V3, f64)> + Clone, orient: V3) -> Option<Plane> {
+    let mut wsum = 0.0;
+    let mut c = [0.0; 3];
+    for (p, w) in points.clone() {
+        wsum += w;
+        c = add(c, scale(p, w));
+    }
+    if wsum <= 0.0 {
+        return None;
+    }
+    c = scale(c, 1.0 / wsum);
+    let mut m = [[0.0; 3]; 3];
+    for (p, w) in points {
+        let q = sub(p, c);
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += w * q[i] * q[j];
+            }
+        }
+    }
+    let (_, vecs) = sym_eigen::<3>(&m);
+    // Eigenvalues are sorted decreasing, so column 2 is the normal.
+    let mut n = [vecs[0][2], vecs[1][2], vecs[2][2]];
+    n = normalize(n)?;
+    if dot(n, orient) < 0.0 {
+        n = scale(n, -1.0);
+    }
+    Some(Plane { n, d: -dot(n, c) })
+}
+
+/// Bounding-box diagonal of the vertices used by faces.
+pub fn bbox_diagonal(mesh: &TriMesh) -> f64 {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for f in &mesh.faces {
+        for &v in f {
+            let p = mesh.positions[v as usize];
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+    }
+    if lo[0] > hi[0] {
+        return 0.0;
+    }
+    norm(sub(hi, lo))
+}
+
+/// Mean edge length over the listed edges (the length unit of the stages' parameters).
+pub fn mean_edge_length(pos: &[V3], edges: &[[u32; 2]]) -> f64 {
+    if edges.is_empty() {
+        return 1.0;
+    }
+    let s: f64 = edges
+        .iter()
+        .map(|e| norm(sub(pos[e[1] as usize], pos[e[0] as usize])))
+        .sum();
+    s / edges.len() as f64
+}
+
+/// Solves the small dense system A x = b (row-major n×n) by Gaussian elimination with partial
+/// pivoting; `None` when a pivot vanishes.
+pub fn solve_dense(a: &mut [f64], b: &mut [f64], n: usize) -> Option<()> {
+    for col in 0..n {
+        let piv =
+            (col..n).max_by(|&i, &j| a[i * n + col].abs().total_cmp(&a[j * n + col].abs()))?;
+        if a[piv * n + col].abs() < 1e-300 {
+            return None;
+        }
+        if piv != col {
+            for k in 0..n {
+                a.swap(piv * n + k, col * n + k);
+            }
+            b.swap(piv, col);
+        }
+        for r in col + 1..n {
+            let f = a[r * n + col] / a[col * n + col];
+            if f != 0.0 {
+                for k in col..n {
+                    a[r * n + k] -= f * a[col * n + k];
+                }
+                b[r] -= f * b[col];
+            }
+        }
+    }
+    for col in (0..n).rev() {
+        let mut s = b[col];
+        for k in col + 1..n {
+            s -= a[col * n + k] * b[k];
+        }
+        b[col] = s / a[col * n + col];
+    }
+    Some(())
+}
+
+/// Deterministic pseudo-random numbers (SplitMix64): reproducible seeds without a dependency.
+pub struct SplitMix(pub u64);
+
+impl SplitMix {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform integer in 0..n (n > 0); the modulo bias is irrelevant for seed shuffling.
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n.max(1) as u64) as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn minimal_rotation_maps_from_onto_to_and_keeps_lengths() {
+        let from = normalize([1.0, 2.0, 3.0]).unwrap_or([0.0; 3]);
+        for to in [[0.0, 0.0, 1.0], [-1.0, 0.5, 0.2], scale(from, -1.0)] {
+            let to = normalize(to).unwrap_or([0.0; 3]);
+            let r = rotate_min(from, to, from);
+            assert!(norm(sub(r, to)) < 1e-12, "{r:?} vs {to:?}");
+            let v = [0.3, -0.7, 2.0];
+            assert!((norm(rotate_min(from, to, v)) - norm(v)).abs() < 1e-12);
+        }
+        // The axis from × to is left alone (minimal rotation).
+        let (a, b) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+        assert!(norm(sub(rotate_min(a, b, [0.0, 0.0, 1.0]), [0.0, 0.0, 1.0])) < 1e-12);
+    }
+
+    #[test]
+    fn plane_fit_recovers_a_tilted_plane_and_orients_it() {
+        let n = normalize([1.0, -2.0, 0.5]).unwrap_or([0.0; 3]);
+        let u = normalize(cross(n, [0.0, 0.0, 1.0])).unwrap_or([0.0; 3]);
+        let w = cross(n, u);
+        let pts: Vec<(V3, f64)> = (0..20)
+            .map(|i| {
+                let (a, b) = ((i % 5) as f64, (i / 5) as f64 * 0.7);
+                (add(add(scale(u, a), scale(w, b)), scale(n, -3.0)), 1.0)
+            })
+            .collect();
+        let p = fit_plane(pts.iter().copied(), scale(n, -1.0)).unwrap();
+        assert!((dot(p.n, n) + 1.0).abs() < 1e-10, "oriented along the hint");
+        for (q, _) in &pts {
+            assert!(p.signed_distance(*q).abs() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn dense_solve_matches_a_known_solution_and_reports_singular() {
+        let mut a = [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let x = [1.0, -2.0, 0.5];
+        let mut b = [0.0; 3];
+        for i in 0..3 {
+            b[i] = (0..3).map(|j| a[i * 3 + j] * x[j]).sum();
+        }
+        assert!(solve_dense(&mut a, &mut b, 3).is_some());
+        for i in 0..3 {
+            assert!((b[i] - x[i]).abs() < 1e-12);
+        }
+        let mut s = [1.0, 2.0, 2.0, 4.0];
+        assert!(solve_dense(&mut s, &mut [1.0, 1.0], 2).is_none());
+    }
+}

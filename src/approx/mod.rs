@@ -1,0 +1,495 @@
+//! Planar-polygon approximation of a triangle mesh (Hu & Zhang 2017, "Shape approximation via
+//! sparse optimization"): represent the surface by at most K planar regions.
+//!
+//! Pipeline (all CPU, sparse systems solved by CG):
+//! 1. [`normals_l0`]: L0 smoothing of face normals (ALM) → piecewise-constant normals;
+//! 2. [`vertex_update`]: vertices follow the smoothed normals (Poisson-type least squares);
+//! 3. [`cluster`]: region growing + merging down to ≤ K regions; the vertices are then pulled
+//!    once more towards the regions' mean normals (stage 2 again), so stage 4 only has to
+//!    remove a small residual instead of folding curved regions flat;
+//! 4. [`boundary_l0`]: boundary-vertex L0 with planarity constraints (ALM), then projection;
+//! 5. [`polygons`]: one polygon per region, corners where boundaries meet or turn.
+#![forbid(unsafe_code)]
+
+pub mod boundary_l0;
+pub mod cluster;
+pub mod geom;
+pub mod normals_l0;
+pub mod polygons;
+pub mod sparse;
+pub mod untangle;
+pub mod vertex_update;
+
+use std::time::Instant;
+
+use crate::linalg::SolveError;
+use crate::mesh::{MeshError, Topology, TriMesh};
+use boundary_l0::BoundaryL0Options;
+use cluster::ClusterOptions;
+use geom::{dot, face_normals_areas, normalize, Plane, V3};
+use normals_l0::NormalL0Options;
+use vertex_update::VertexUpdateOptions;
+
+/// Errors of the approximation pipeline.
+#[derive(Debug, thiserror::Error)]
+pub enum ApproxError {
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error("approx: {0}")]
+    BadInput(String),
+    #[error("approx: {0}")]
+    Solve(#[from] SolveError),
+}
+
+impl ApproxError {
+    /// 2 for unusable input, 1 for a numerical failure.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            ApproxError::Mesh(_) | ApproxError::BadInput(_) => 2,
+            ApproxError::Solve(_) => 1,
+        }
+    }
+}
+
+/// All parameters of [`approximate`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ApproxOptions {
+    /// Largest number of planar regions.
+    pub k: usize,
+    /// Seed of the region-growing order.
+    pub seed: u64,
+    /// Region-growing / merge angle θ in degrees.
+    pub angle_deg: f64,
+    pub normals: NormalL0Options,
+    pub vertices: VertexUpdateOptions,
+    /// Majority filter on region boundaries before planarity (see `cluster::smooth_boundaries`).
+    pub smooth_boundaries: bool,
+    /// Lower θ (×0.75) while region growing gives fewer than K regions.
+    pub adapt_angle: bool,
+    /// Smallest θ tried by the adaptation.
+    pub min_angle_deg: f64,
+    /// Regions meeting at a vertex are merged while their planes' common point is farther than
+    /// this × bbox diagonal from it (see `cluster::merge_unreachable_corners`).
+    pub corner_reach_rel: f64,
+    /// … and farther than this × the vertex's distance to those planes.
+    pub corner_amplification: f64,
+    /// Rounds of "merge the regions that still fold, planarize again".
+    pub max_merge_passes: usize,
+    pub boundary: BoundaryL0Options,
+}
+
+impl ApproxOptions {
+    pub fn new(k: usize) -> ApproxOptions {
+        ApproxOptions {
+            k,
+            seed: 1,
+            angle_deg: 20.0,
+            normals: NormalL0Options::default(),
+            vertices: VertexUpdateOptions::default(),
+            max_merge_passes: 0,
+            corner_reach_rel: 0.04,
+            corner_amplification: 8.0,
+            adapt_angle: true,
+            smooth_boundaries: true,
+            min_angle_deg: 3.0,
+            boundary: BoundaryL0Options::default(),
+        }
+    }
+}
+
+/// The pipeline's stages, for progress display.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    Normals,
+    Vertices,
+    Cluster,
+    Planarize,
+    Polygons,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 5] = [
+        Stage::Normals,
+        Stage::Vertices,
+        Stage::Cluster,
+        Stage::Planarize,
+        Stage::Polygons,
+    ];
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Normals => "L0 normal smoothing",
+            Stage::Vertices => "vertex update",
+            Stage::Cluster => "clustering",
+            Stage::Planarize => "boundary L0 + planarity",
+            Stage::Polygons => "polygon extraction",
+        }
+    }
+}
+
+/// Seconds per stage.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StageTimes {
+    pub normals: f64,
+    pub vertices: f64,
+    pub cluster: f64,
+    pub planarize: f64,
+    pub polygons: f64,
+    pub total: f64,
+}
+
+/// Everything the CLI writes to `--report`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ApproxReport {
+    pub faces: usize,
+    pub vertices: usize,
+    pub k_requested: usize,
+    pub k_obtained: usize,
+    /// Regions after region growing, before merging.
+    pub regions_grown: usize,
+    /// Regions after merging down to K (before corner merges and fold checks).
+    pub regions_merged: usize,
+    /// Merge angle reached (larger than asked when merges above θ were needed to reach K).
+    pub final_angle_deg: f64,
+    pub bbox_diagonal: f64,
+    /// Headline error: mean over input vertices of the distance to their region's plane (a
+    /// vertex on several regions counts the mean over them); planes are the final ones.
+    pub mean_input_distance: f64,
+    pub mean_input_distance_rel: f64,
+    pub max_input_distance: f64,
+    pub max_input_distance_rel: f64,
+    /// Planarity of the output: worst distance of an output vertex to a plane of its region.
+    pub max_planarity_deviation: f64,
+    pub max_planarity_deviation_rel: f64,
+    /// Output faces whose normal points against their region's plane normal.
+    pub flipped_faces: usize,
+    /// Output faces whose normal points against their input normal.
+    pub flipped_vs_input: usize,
+    /// Output faces with area ≤ 1e-12·diag².
+    pub degenerate_faces: usize,
+    /// Faces moved to a neighbouring region: all three corners shared with it, or two of
+    /// three edge-neighbours in it (boundary smoothing).
+    pub faces_reassigned: usize,
+    /// Two-region boundary chains re-spaced monotonically along their line.
+    pub chains_respaced: usize,
+    /// Local Tutte repairs run to remove folds.
+    pub fold_repairs: usize,
+    /// Passes that merged still-folding regions into a neighbour.
+    pub merge_passes: usize,
+    /// Region merges at corners whose planes meet too far away, and of closed regions left
+    /// with fewer than three neighbours by them.
+    pub corner_merges: usize,
+    pub vertices_on_4plus_planes: usize,
+    pub unresolved_vertices_4plus: usize,
+    pub unresolved_vertices_other: usize,
+    pub crease_edges: usize,
+    pub alm_rounds_normals: usize,
+    pub alm_rounds_boundary: usize,
+    pub projection_rounds: usize,
+    pub polygons: usize,
+    pub polygon_holes: usize,
+    pub corners: usize,
+    pub seconds: StageTimes,
+    /// Plain-language notes on anything that did not meet the targets.
+    pub notes: Vec<String>,
+    pub options: ApproxOptions,
+}
+
+/// Result of [`approximate`].
+#[derive(Clone, Debug)]
+pub struct ApproxOutput {
+    /// Moved vertices, same order as the input (OUT.obj).
+    pub positions: Vec<V3>,
+    pub face_cluster: Vec<u32>,
+    pub planes: Vec<Option<Plane>>,
+    pub polygons: polygons::PolygonMesh,
+    pub report: ApproxReport,
+}
+
+/// Runs the whole pipeline on a validated mesh (see [`crate::mesh::load`]). `progress` is told
+/// when each stage starts.
+pub fn approximate(
+    mesh: &TriMesh,
+    topo: &Topology,
+    opts: &ApproxOptions,
+    progress: &mut dyn FnMut(Stage),
+) -> Result<ApproxOutput, ApproxError> {
+    if opts.k == 0 {
+        return Err(ApproxError::BadInput("K must be at least 1".into()));
+    }
+    let (n0, a0) = face_normals_areas(&mesh.positions, &mesh.faces);
+    if let Some(f) = a0.iter().position(|&a| a <= 0.0 || !a.is_finite()) {
+        return Err(ApproxError::BadInput(format!("face {f} is degenerate")));
+    }
+    let diag = geom::bbox_diagonal(mesh);
+    let t_all = Instant::now();
+    let mut times = StageTimes::default();
+
+    progress(Stage::Normals);
+    let t = Instant::now();
+    let sm = normals_l0::smooth_normals(&mesh.positions, topo, &n0, &opts.normals)?;
+    times.normals = t.elapsed().as_secs_f64();
+
+    progress(Stage::Vertices);
+    let t = Instant::now();
+    let p1 = vertex_update::update_vertices(mesh, topo, &sm.normals, &opts.vertices)?;
+    times.vertices = t.elapsed().as_secs_f64();
+
+    progress(Stage::Cluster);
+    let t = Instant::now();
+    let m1 = TriMesh {
+        positions: p1,
+        faces: mesh.faces.clone(),
+    };
+    // Cluster on the smoothed normals (piecewise constant); areas from the updated surface.
+    let (_, a1) = face_normals_areas(&m1.positions, &m1.faces);
+    // θ is refined while region growing yields fewer than K regions: the budget K is then
+    // spent on flatter regions (smaller error, less to fold) instead of being left unused.
+    let mut angle = opts.angle_deg;
+    let cl = loop {
+        let cl = cluster::cluster_faces(
+            topo,
+            &sm.normals,
+            &a1,
+            &ClusterOptions {
+                k: opts.k,
+                angle_deg: angle,
+                seed: opts.seed,
+            },
+        );
+        if cl.grown >= opts.k || angle < opts.min_angle_deg || !opts.adapt_angle {
+            break cl;
+        }
+        angle *= 0.75;
+    };
+    let mut face_cluster = cl.face_cluster.clone();
+    let smoothed = if opts.smooth_boundaries {
+        cluster::smooth_boundaries(topo, &mut face_cluster, 16)
+    } else {
+        0
+    };
+    let corner_merges = cluster::merge_unreachable_corners(
+        topo,
+        &mesh.faces,
+        &mesh.positions,
+        &mut face_cluster,
+        &n0,
+        &a0,
+        opts.corner_reach_rel * diag,
+        opts.corner_amplification,
+        64,
+    );
+    let collapse_merges = cluster::merge_collapsing_regions(topo, &mut face_cluster, &n0, &a0);
+    let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
+    let n_clusters = renumber(&mut face_cluster);
+    times.cluster = t.elapsed().as_secs_f64();
+    let m1 = TriMesh {
+        positions: m1.positions,
+        faces: mesh.faces.clone(),
+    };
+
+    // Pull every region towards its mean normal, then make it planar; a region that still
+    // folds (typically where three nearly dependent planes must share a corner) is merged into
+    // its closest neighbour and the pass repeated — the "merging" answer to configurations
+    // that exact planarity cannot realise without folds. The best pass is kept.
+    let min_area = 1e-12 * diag * diag;
+    let mut best: Option<(
+        usize,
+        Vec<u32>,
+        usize,
+        boundary_l0::Planarized,
+        untangle::Untangled,
+    )> = None;
+    let mut merge_passes = 0;
+    let mut n_clusters = n_clusters;
+    for pass in 0..=opts.max_merge_passes {
+        progress(Stage::Vertices);
+        let t = Instant::now();
+        let mut sums = vec![[0.0; 3]; n_clusters];
+        for (f, &c) in face_cluster.iter().enumerate() {
+            sums[c as usize] = geom::add(sums[c as usize], geom::scale(n0[f], a0[f]));
+        }
+        let target: Vec<V3> = face_cluster
+            .iter()
+            .enumerate()
+            .map(|(f, &c)| normalize(sums[c as usize]).unwrap_or(n0[f]))
+            .collect();
+        let p2 = vertex_update::update_vertices(&m1, topo, &target, &opts.vertices)?;
+        times.vertices += t.elapsed().as_secs_f64();
+
+        progress(Stage::Planarize);
+        let t = Instant::now();
+        let m2 = TriMesh {
+            positions: p2,
+            faces: mesh.faces.clone(),
+        };
+        let mut pl =
+            boundary_l0::planarize(&m2, topo, &face_cluster, n_clusters, diag, &opts.boundary)?;
+        let ut = untangle::untangle(
+            topo,
+            &mesh.faces,
+            &face_cluster,
+            &pl.planes,
+            &mesh.positions,
+            &mut pl.positions,
+            min_area,
+        )?;
+        times.planarize += t.elapsed().as_secs_f64();
+        let bad = untangle::bad_faces(
+            &pl.positions,
+            &mesh.faces,
+            &face_cluster,
+            &pl.planes,
+            min_area,
+        );
+        let nbad = bad.len();
+        let better = best.as_ref().map_or(true, |b| nbad < b.0);
+        let mut bad_regions: Vec<u32> = bad.iter().map(|&f| face_cluster[f]).collect();
+        bad_regions.sort_unstable();
+        bad_regions.dedup();
+        let fc_now = face_cluster.clone();
+        if better {
+            best = Some((nbad, fc_now, n_clusters, pl, ut));
+        }
+        if nbad == 0 || pass == opts.max_merge_passes || n_clusters <= 1 {
+            break;
+        }
+        merge_passes += 1;
+        let t = Instant::now();
+        cluster::merge_regions(topo, &mut face_cluster, &bad_regions, &sums);
+        cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
+        n_clusters = renumber(&mut face_cluster);
+        times.cluster += t.elapsed().as_secs_f64();
+    }
+    // `best` is set in the first pass, which always runs.
+    let Some((_, face_cluster, n_clusters, pl, ut)) = best else {
+        return Err(ApproxError::BadInput("no planarization pass ran".into()));
+    };
+
+    progress(Stage::Polygons);
+    let t = Instant::now();
+    let polys = polygons::extract(topo, &mesh.faces, &pl.positions, &face_cluster, n_clusters);
+    times.polygons = t.elapsed().as_secs_f64();
+    times.total = t_all.elapsed().as_secs_f64();
+
+    // Errors and checks.
+    let vc = cluster::vertex_clusters(topo, &face_cluster);
+    let (mut sum, mut cnt, mut maxd, mut maxp) = (0.0, 0usize, 0.0f64, 0.0f64);
+    for (v, cs) in vc.iter().enumerate() {
+        let ds: Vec<f64> = cs
+            .iter()
+            .filter_map(|&c| pl.planes[c as usize])
+            .map(|p| p.signed_distance(mesh.positions[v]).abs())
+            .collect();
+        if !ds.is_empty() {
+            sum += ds.iter().sum::<f64>() / ds.len() as f64;
+            cnt += 1;
+            maxd = ds.iter().copied().fold(maxd, f64::max);
+        }
+        for &c in cs {
+            if let Some(p) = pl.planes[c as usize] {
+                maxp = maxp.max(p.signed_distance(pl.positions[v]).abs());
+            }
+        }
+    }
+    let mean = sum / cnt.max(1) as f64;
+    let (n_out, a_out) = face_normals_areas(&pl.positions, &mesh.faces);
+    let mut flipped = 0;
+    let mut flipped_in = 0;
+    let mut degenerate = 0;
+    for f in 0..mesh.faces.len() {
+        if a_out[f] <= 1e-12 * diag * diag {
+            degenerate += 1;
+            continue;
+        }
+        if let Some(p) = pl.planes[face_cluster[f] as usize] {
+            flipped += usize::from(dot(n_out[f], p.n) <= 0.0);
+        }
+        flipped_in += usize::from(dot(n_out[f], n0[f]) <= 0.0);
+    }
+    let mut notes = Vec::new();
+    let rel = |x: f64| if diag > 0.0 { x / diag } else { 0.0 };
+    if rel(maxp) > 1e-6 {
+        notes.push(format!(
+            "planarity {:.2e}·diag exceeds 1e-6·diag: {} vertices on ≥4 regions and {} on ≤3 regions stay above tolerance after {} projection rounds (≥4 planes through one point is over-determined)",
+            rel(maxp), pl.unresolved_4plus, pl.unresolved_other, pl.projection_rounds
+        ));
+    }
+    if cl.count > opts.k {
+        notes.push(format!(
+            "{} regions remain (> K = {}): separate components cannot be merged",
+            cl.count, opts.k
+        ));
+    }
+    if flipped + degenerate > 0 {
+        notes.push(format!(
+            "{flipped} faces flipped against their plane and {degenerate} degenerate in the output"
+        ));
+    }
+    let report = ApproxReport {
+        faces: mesh.faces.len(),
+        vertices: mesh.positions.len(),
+        k_requested: opts.k,
+        k_obtained: n_clusters,
+        regions_grown: cl.grown,
+        regions_merged: cl.count,
+        final_angle_deg: cl.final_angle_deg,
+        bbox_diagonal: diag,
+        mean_input_distance: mean,
+        mean_input_distance_rel: rel(mean),
+        max_input_distance: maxd,
+        max_input_distance_rel: rel(maxd),
+        max_planarity_deviation: maxp,
+        max_planarity_deviation_rel: rel(maxp),
+        flipped_faces: flipped,
+        flipped_vs_input: flipped_in,
+        degenerate_faces: degenerate,
+        faces_reassigned: reassigned + smoothed,
+        chains_respaced: ut.chains_respaced,
+        fold_repairs: ut.patches_embedded,
+        merge_passes,
+        corner_merges: corner_merges + collapse_merges,
+        vertices_on_4plus_planes: pl.vertices_on_4plus,
+        unresolved_vertices_4plus: pl.unresolved_4plus,
+        unresolved_vertices_other: pl.unresolved_other,
+        crease_edges: sm.crease_edges,
+        alm_rounds_normals: sm.rounds,
+        alm_rounds_boundary: pl.alm_rounds,
+        projection_rounds: pl.projection_rounds,
+        polygons: polys.polygons.len(),
+        polygon_holes: polys.holes,
+        corners: polys.corners.len(),
+        seconds: times,
+        notes,
+        options: opts.clone(),
+    };
+    Ok(ApproxOutput {
+        positions: pl.positions,
+        face_cluster,
+        planes: pl.planes,
+        polygons: polys,
+        report,
+    })
+}
+
+/// Renumbers region labels to 0..count in order of first appearance (drops emptied regions).
+fn renumber(labels: &mut [u32]) -> usize {
+    let mut map = std::collections::HashMap::new();
+    for l in labels.iter_mut() {
+        let next = map.len() as u32;
+        *l = *map.entry(*l).or_insert(next);
+    }
+    map.len()
+}
+
+/// OBJ text of the input connectivity on new positions (same `v` and `f` order as the input).
+pub fn mesh_obj(positions: &[V3], faces: &[[u32; 3]]) -> String {
+    use std::fmt::Write;
+    let mut s = String::from("# foldfree approx: planar regions, input connectivity\n");
+    for p in positions {
+        let _ = writeln!(s, "v {:.17e} {:.17e} {:.17e}", p[0], p[1], p[2]);
+    }
+    for f in faces {
+        let _ = writeln!(s, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1);
+    }
+    s
+}

@@ -1,0 +1,127 @@
+//! Stage 2: move the vertices so that the faces take prescribed normals.
+//!
+//! Each face is turned to its target normal by the minimal rotation R_f about its centroid;
+//! the vertices are then the least-squares fit of the rotated edges,
+//!   E = E_Poisson/Ā + λ·E_Smooth/l̄,
+//!   E_Poisson = Σ_f A_f Σ_{edges ab of f} |v_b − v_a − R_f(x_b − x_a)|²  (face-gradient matching),
+//!   E_Smooth  = Σ_{interior edges, wings k∈f, l∈g} |e| · |v_l − v_k − ½(R_f + R_g)(x_l − x_k)|²
+//! (the dihedral-rotation term: across each edge the two faces must agree on how the wing
+//! vector turns, which stops a face from sliding against its neighbour). Both are sums of
+//! |v_b − v_a − t|² terms, so the normal equations are one weighted graph Laplacian shared by
+//! x, y and z, plus a tiny anchor to the current positions that removes the translation null
+//! space. The rotation is linearised at the current positions, so the solve is repeated.
+
+use sprs::{CsMat, TriMat};
+
+use super::geom::{add, face_normals_areas, mean_edge_length, rotate_min, scale, sub, V3};
+use super::sparse::solve_spd;
+use crate::linalg::SolveError;
+use crate::mesh::{Topology, TriMesh};
+
+/// Parameters of [`update_vertices`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct VertexUpdateOptions {
+    /// λ, weight of the smoothness term.
+    pub lambda: f64,
+    /// Anchor weight (relative to the Laplacian's unit weights).
+    pub anchor: f64,
+    /// Linearise–solve rounds.
+    pub rounds: usize,
+}
+
+impl Default for VertexUpdateOptions {
+    fn default() -> Self {
+        VertexUpdateOptions {
+            lambda: 0.1,
+            anchor: 1e-4,
+            rounds: 4,
+        }
+    }
+}
+
+/// Accumulates Σ w |v_b − v_a − t|² + anchor·Σ|v − x|² into normal equations.
+struct EdgeLsq {
+    t: TriMat<f64>,
+    rhs: [Vec<f64>; 3],
+}
+
+impl EdgeLsq {
+    fn new(n: usize, anchor: f64, x: &[V3]) -> EdgeLsq {
+        let mut t = TriMat::new((n, n));
+        let mut rhs = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        for (i, p) in x.iter().enumerate() {
+            t.add_triplet(i, i, anchor);
+            for k in 0..3 {
+                rhs[k][i] += anchor * p[k];
+            }
+        }
+        EdgeLsq { t, rhs }
+    }
+    fn term(&mut self, a: usize, b: usize, w: f64, target: V3) {
+        self.t.add_triplet(a, a, w);
+        self.t.add_triplet(b, b, w);
+        self.t.add_triplet(a, b, -w);
+        self.t.add_triplet(b, a, -w);
+        for k in 0..3 {
+            self.rhs[k][b] += w * target[k];
+            self.rhs[k][a] -= w * target[k];
+        }
+    }
+}
+
+/// Moves the vertices of `mesh` so that face f gets normal `target[f]` (unit); returns the new
+/// positions (unreferenced vertices stay where they are).
+pub fn update_vertices(
+    mesh: &TriMesh,
+    topo: &Topology,
+    target: &[V3],
+    opts: &VertexUpdateOptions,
+) -> Result<Vec<V3>, SolveError> {
+    let n = mesh.positions.len();
+    let mut x = mesh.positions.clone();
+    let lbar = mean_edge_length(&x, &topo.edges);
+    for _ in 0..opts.rounds {
+        let (normals, areas) = face_normals_areas(&x, &mesh.faces);
+        let abar = areas.iter().sum::<f64>() / areas.len().max(1) as f64;
+        let rot = |f: usize, v: V3| rotate_min(normals[f], target[f], v);
+        // Anchor in units of the Laplacian weights (which are ~1 after dividing by Ā, l̄).
+        let mut sys = EdgeLsq::new(n, opts.anchor, &x);
+        for (f, face) in mesh.faces.iter().enumerate() {
+            let w = areas[f] / abar;
+            for k in 0..3 {
+                let (a, b) = (face[k] as usize, face[(k + 1) % 3] as usize);
+                sys.term(a, b, w, rot(f, sub(x[b], x[a])));
+            }
+        }
+        if opts.lambda > 0.0 {
+            for &e in &topo.interior_edges {
+                let [f, g] = topo.edge_faces[e as usize].map(|v| v as usize);
+                let [i, j] = topo.edges[e as usize].map(|v| v as usize);
+                let wing = |face: [u32; 3]| {
+                    face.iter()
+                        .map(|&v| v as usize)
+                        .find(|&v| v != i && v != j)
+                        .unwrap_or(i)
+                };
+                let (k, l) = (wing(mesh.faces[f]), wing(mesh.faces[g]));
+                let d = sub(x[l], x[k]);
+                let t = scale(add(rot(f, d), rot(g, d)), 0.5);
+                let len = super::geom::norm(sub(x[j], x[i]));
+                sys.term(k, l, opts.lambda * len / lbar, t);
+            }
+        }
+        let a: CsMat<f64> = sys.t.to_csr();
+        let b: Vec<Vec<f64>> = sys.rhs.to_vec();
+        let mut cols: Vec<Vec<f64>> = (0..3).map(|k| x.iter().map(|p| p[k]).collect()).collect();
+        solve_spd(&a, &b, &mut cols, 1e-9)?;
+        for (i, p) in x.iter_mut().enumerate() {
+            *p = [cols[0][i], cols[1][i], cols[2][i]];
+        }
+        if x.iter().any(|p| p.iter().any(|c| !c.is_finite())) {
+            return Err(SolveError::NonFinite {
+                what: "vertex update".into(),
+            });
+        }
+    }
+    Ok(x)
+}

@@ -1,0 +1,438 @@
+//! Planar approximation (`foldfree::approx`): each stage on tiny meshes with known answers (a
+//! noisy subdivided cube → 6 planes, a noisy flat grid → 1 plane), the whole pipeline, and the
+//! `foldfree approx` CLI. Meshes are generated here.
+
+#[path = "common/tempdir.rs"]
+mod tempdir;
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::process::Command;
+
+use foldfree::approx::boundary_l0::{planarize, BoundaryL0Options};
+use foldfree::approx::cluster::{cluster_faces, ClusterOptions};
+use foldfree::approx::geom::{bbox_diagonal, dot, face_normals_areas, V3};
+use foldfree::approx::normals_l0::{smooth_normals, NormalL0Options};
+use foldfree::approx::polygons::ear_clip;
+use foldfree::approx::vertex_update::{update_vertices, VertexUpdateOptions};
+use foldfree::approx::{approximate, ApproxOptions};
+use foldfree::mesh::{Topology, TriMesh};
+use tempdir::TempDir;
+
+/// Deterministic noise in [-1, 1].
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+}
+
+/// Cube [0,1]³ with an n×n grid on each side, outward counter-clockwise faces, every vertex
+/// moved by up to `noise` in each coordinate.
+fn noisy_cube(n: usize, noise: f64, seed: u64) -> TriMesh {
+    let mut index: HashMap<[usize; 3], u32> = HashMap::new();
+    let mut positions: Vec<V3> = Vec::new();
+    let mut faces = Vec::new();
+    let mut vid = |p: [usize; 3], positions: &mut Vec<V3>| {
+        *index.entry(p).or_insert_with(|| {
+            positions.push(p.map(|c| c as f64 / n as f64));
+            (positions.len() - 1) as u32
+        })
+    };
+    for axis in 0..3 {
+        for side in [0, n] {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            // e_u × e_v = +e_axis, so (u, v) order is counter-clockwise seen from +axis.
+            let outward = side == n;
+            for i in 0..n {
+                for j in 0..n {
+                    let corner = |di: usize, dj: usize| {
+                        let mut p = [0; 3];
+                        p[axis] = side;
+                        p[u] = i + di;
+                        p[v] = j + dj;
+                        p
+                    };
+                    let q = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)]
+                        .map(|p| vid(p, &mut positions));
+                    if outward {
+                        faces.push([q[0], q[1], q[2]]);
+                        faces.push([q[0], q[2], q[3]]);
+                    } else {
+                        faces.push([q[0], q[2], q[1]]);
+                        faces.push([q[0], q[3], q[2]]);
+                    }
+                }
+            }
+        }
+    }
+    let mut rng = Lcg(seed);
+    for p in &mut positions {
+        for c in p.iter_mut() {
+            *c += noise * rng.next();
+        }
+    }
+    TriMesh { positions, faces }
+}
+
+/// Flat n×n grid on [0,1]² (z = 0 plus noise in z).
+fn noisy_grid(n: usize, noise: f64, seed: u64) -> TriMesh {
+    let mut rng = Lcg(seed);
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            positions.push([i as f64 / n as f64, j as f64 / n as f64, noise * rng.next()]);
+        }
+    }
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    let mut faces = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    TriMesh { positions, faces }
+}
+
+fn topo(m: &TriMesh) -> Topology {
+    Topology::build(m, Path::new("generated")).expect("generated meshes are manifold")
+}
+
+/// The cube side a direction belongs to: 0..6 (axis·2 + positive).
+fn side_of(n: V3) -> usize {
+    let axis = (0..3)
+        .max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs()))
+        .unwrap_or(0);
+    axis * 2 + usize::from(n[axis] > 0.0)
+}
+
+fn true_normal(side: usize) -> V3 {
+    let mut n = [0.0; 3];
+    n[side / 2] = if side % 2 == 1 { 1.0 } else { -1.0 };
+    n
+}
+
+#[test]
+fn l0_normals_of_a_noisy_cube_become_the_six_axis_normals() {
+    let m = noisy_cube(6, 0.01, 7);
+    let t = topo(&m);
+    let (n0, _) = face_normals_areas(&m.positions, &m.faces);
+    let worst_in = n0
+        .iter()
+        .map(|&n| dot(n, true_normal(side_of(n))))
+        .fold(1.0, f64::min);
+    // α sized for this noise (±0.01 on edges of 1/6 tilts normals by up to ~9°): the jump a
+    // noisy face makes, |Δn|² ≈ 0.02, must cost less than α to be smoothed away.
+    let opts = NormalL0Options {
+        alpha: 0.1,
+        ..NormalL0Options::default()
+    };
+    let r = smooth_normals(&m.positions, &t, &n0, &opts).unwrap();
+    let worst_out = r
+        .normals
+        .iter()
+        .map(|&n| dot(n, true_normal(side_of(n))))
+        .fold(1.0, f64::min);
+    assert!(
+        worst_in < 0.999,
+        "the noise must tilt some normals ({worst_in})"
+    );
+    assert!(
+        worst_out > 0.999,
+        "smoothed normals stay off-axis: cos {worst_out}"
+    );
+    // The 12 cube edges carry 12·6 mesh edges; the creases must survive the L0 smoothing.
+    assert!(
+        r.crease_edges >= 12 * 6,
+        "only {} crease edges",
+        r.crease_edges
+    );
+    assert!(r.rounds > 1);
+}
+
+#[test]
+fn vertex_update_flattens_a_noisy_grid_towards_its_target_normal() {
+    let m = noisy_grid(8, 0.02, 3);
+    let t = topo(&m);
+    let target = vec![[0.0, 0.0, 1.0]; m.faces.len()];
+    let spread = |p: &[V3]| {
+        let zs: Vec<f64> = p.iter().map(|q| q[2]).collect();
+        zs.iter().copied().fold(f64::MIN, f64::max) - zs.iter().copied().fold(f64::MAX, f64::min)
+    };
+    let x = update_vertices(&m, &t, &target, &VertexUpdateOptions::default()).unwrap();
+    assert!(spread(&m.positions) > 0.02);
+    assert!(
+        spread(&x) < 0.1 * spread(&m.positions),
+        "z spread {} → {}",
+        spread(&m.positions),
+        spread(&x)
+    );
+    // Faces still point up (nothing folded).
+    let (n, _) = face_normals_areas(&x, &m.faces);
+    assert!(n.iter().all(|q| q[2] > 0.9));
+}
+
+#[test]
+fn clustering_finds_six_sides_of_a_cube_and_one_region_of_a_grid() {
+    let m = noisy_cube(6, 0.005, 11);
+    let t = topo(&m);
+    let (n0, a0) = face_normals_areas(&m.positions, &m.faces);
+    for seed in [1, 2] {
+        let c = cluster_faces(
+            &t,
+            &n0,
+            &a0,
+            &ClusterOptions {
+                k: 24,
+                angle_deg: 20.0,
+                seed,
+            },
+        );
+        assert_eq!(c.count, 6, "seed {seed}");
+        // Each region is exactly one side.
+        let mut side_of_region = HashMap::new();
+        for (f, &r) in c.face_cluster.iter().enumerate() {
+            let s = side_of(n0[f]);
+            assert_eq!(*side_of_region.entry(r).or_insert(s), s);
+        }
+    }
+    // Asking for fewer regions than the sides forces merges (θ relaxed), never more than K.
+    let c = cluster_faces(
+        &t,
+        &n0,
+        &a0,
+        &ClusterOptions {
+            k: 3,
+            angle_deg: 20.0,
+            seed: 1,
+        },
+    );
+    assert!(c.count <= 3 && c.final_angle_deg > 20.0);
+    // Same seed, same answer.
+    let opts = ClusterOptions {
+        k: 4,
+        angle_deg: 20.0,
+        seed: 9,
+    };
+    assert_eq!(
+        cluster_faces(&t, &n0, &a0, &opts),
+        cluster_faces(&t, &n0, &a0, &opts)
+    );
+
+    let g = noisy_grid(6, 0.002, 5);
+    let tg = topo(&g);
+    let (ng, ag) = face_normals_areas(&g.positions, &g.faces);
+    let c = cluster_faces(
+        &tg,
+        &ng,
+        &ag,
+        &ClusterOptions {
+            k: 5,
+            angle_deg: 20.0,
+            seed: 1,
+        },
+    );
+    assert_eq!(c.count, 1);
+}
+
+#[test]
+fn planarize_makes_each_cube_side_exactly_planar_on_the_axis_planes() {
+    let m = noisy_cube(5, 0.01, 13);
+    let t = topo(&m);
+    let (n0, _) = face_normals_areas(&m.positions, &m.faces);
+    let fc: Vec<u32> = n0.iter().map(|&n| side_of(n) as u32).collect();
+    let diag = bbox_diagonal(&m);
+    let p = planarize(&m, &t, &fc, 6, diag, &BoundaryL0Options::default()).unwrap();
+    assert!(
+        p.max_violation <= 1e-7 * diag,
+        "violation {}",
+        p.max_violation
+    );
+    for (s, pl) in p.planes.iter().enumerate() {
+        let pl = pl.expect("every side has vertices");
+        assert!(dot(pl.n, true_normal(s)) > 0.999, "side {s}: {:?}", pl.n);
+    }
+    // Cube corners sit on three planes, cube edges on two: recompute independently.
+    for (v, q) in p.positions.iter().enumerate() {
+        for (f, face) in m.faces.iter().enumerate() {
+            if face.contains(&(v as u32)) {
+                let pl = p.planes[fc[f] as usize].unwrap();
+                assert!((dot(pl.n, *q) + pl.d).abs() <= 1e-7 * diag);
+            }
+        }
+    }
+    assert_eq!(p.vertices_on_4plus, 0);
+}
+
+#[test]
+fn pipeline_turns_a_noisy_cube_into_six_planar_squares() {
+    let m = noisy_cube(6, 0.01, 21);
+    let t = topo(&m);
+    let out = approximate(&m, &t, &ApproxOptions::new(24), &mut |_| {}).unwrap();
+    let r = &out.report;
+    assert_eq!(r.k_obtained, 6);
+    assert!(r.max_planarity_deviation_rel <= 1e-6);
+    assert_eq!(r.flipped_faces, 0);
+    assert_eq!(r.degenerate_faces, 0);
+    // Input vertices are within the noise of their plane.
+    assert!(r.max_input_distance <= 0.05, "{}", r.max_input_distance);
+    assert!(r.mean_input_distance > 0.0);
+    assert_eq!(r.polygons, 6);
+    assert_eq!(r.corners, 8, "a cube has 8 corners");
+    assert!(out.polygons.polygons.iter().all(|p| p.len() == 4));
+    assert_eq!(out.polygons.triangulate().len(), 12);
+    assert!(r.notes.is_empty(), "{:?}", r.notes);
+    // Same seed, same output.
+    let again = approximate(&m, &t, &ApproxOptions::new(24), &mut |_| {}).unwrap();
+    assert_eq!(again.positions, out.positions);
+}
+
+#[test]
+fn pipeline_turns_a_noisy_grid_into_one_square() {
+    let m = noisy_grid(8, 0.003, 2);
+    let t = topo(&m);
+    let out = approximate(&m, &t, &ApproxOptions::new(5), &mut |_| {}).unwrap();
+    let r = &out.report;
+    assert_eq!(r.k_obtained, 1);
+    assert!(r.max_planarity_deviation_rel <= 1e-6);
+    assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
+    assert_eq!(r.polygons, 1);
+    assert_eq!(r.corners, 4);
+}
+
+#[test]
+fn ear_clipping_a_keyhole_square_covers_its_area() {
+    // Square 4×4 with a 2×2 hole bridged from (3,2) to (4,2): area 12.
+    let p = [
+        [0.0, 0.0],
+        [4.0, 0.0],
+        [4.0, 2.0],
+        [3.0, 2.0],
+        [3.0, 1.0],
+        [1.0, 1.0],
+        [1.0, 3.0],
+        [3.0, 3.0],
+        [3.0, 2.0],
+        [4.0, 2.0],
+        [4.0, 4.0],
+        [0.0, 4.0],
+    ];
+    let tris = ear_clip(&p);
+    assert_eq!(tris.len(), p.len() - 2);
+    let area: f64 = tris
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| p[i]);
+            0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+        })
+        .sum();
+    assert!((area - 12.0).abs() < 1e-12, "area {area}");
+}
+
+fn write_obj(path: &Path, m: &TriMesh) {
+    let mut s = String::new();
+    for p in &m.positions {
+        s += &format!("v {} {} {}\n", p[0], p[1], p[2]);
+    }
+    for f in &m.faces {
+        s += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+fn obj_counts(path: &Path) -> (Vec<V3>, Vec<Vec<usize>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut v = Vec::new();
+    let mut f = Vec::new();
+    for l in text.lines() {
+        let w: Vec<&str> = l.split_whitespace().collect();
+        match w.first() {
+            Some(&"v") => v.push([w[1], w[2], w[3]].map(|x| x.parse::<f64>().unwrap())),
+            Some(&"f") => f.push(w[1..].iter().map(|x| x.parse::<usize>().unwrap()).collect()),
+            _ => {}
+        }
+    }
+    (v, f)
+}
+
+#[test]
+fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
+    let tmp = TempDir::new("approx_cli");
+    let m = noisy_cube(4, 0.01, 5);
+    let input = tmp.join("cube.obj");
+    write_obj(&input, &m);
+    let (out, poly, tri, rep) = (
+        tmp.join("out.obj"),
+        tmp.join("poly.obj"),
+        tmp.join("tri.obj"),
+        tmp.join("r.json"),
+    );
+    let run = |extra: &[&Path], flags: &[&str]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_foldfree"));
+        c.arg("approx")
+            .arg(&input)
+            .args(["-k", "10", "-q", "-o"])
+            .arg(&out);
+        for (i, p) in extra.iter().enumerate() {
+            c.arg(["--polygons", "--report"][i]).arg(p);
+        }
+        c.args(flags);
+        c.output().unwrap()
+    };
+    let o = run(&[&poly, &rep], &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (v, f) = obj_counts(&out);
+    assert_eq!(v.len(), m.positions.len());
+    let faces: Vec<Vec<usize>> = m
+        .faces
+        .iter()
+        .map(|f| f.iter().map(|&i| i as usize + 1).collect())
+        .collect();
+    assert_eq!(f, faces, "same face order");
+    let (pv, pf) = obj_counts(&poly);
+    assert_eq!((pv.len(), pf.len()), (8, 6));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    assert_eq!(r["k_obtained"], 6);
+    assert_eq!(r["k_requested"], 10);
+    assert!(r["mean_input_distance"].as_f64().unwrap() > 0.0);
+    assert!(r["seconds"]["total"].as_f64().is_some());
+
+    let o = run(&[&tri], &["--triangulate"]);
+    assert!(o.status.success());
+    let (_, tf) = obj_counts(&tri);
+    assert_eq!(tf.len(), 12);
+    assert!(tf.iter().all(|f| f.len() == 3));
+
+    // Non-manifold input: exit 2 with a located message, no output written.
+    let bad = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/nonmanifold_edge_fan.obj");
+    let out2 = tmp.join("never.obj");
+    let o = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("approx")
+        .arg(&bad)
+        .args(["-k", "4", "-q", "-o"])
+        .arg(&out2)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(!out2.exists());
+    // K = 0 is a usage error.
+    let o = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("approx")
+        .arg(&input)
+        .args(["-k", "0", "-q", "-o"])
+        .arg(&out2)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+}
