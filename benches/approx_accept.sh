@@ -1,9 +1,9 @@
 #!/bin/sh
 # Acceptance runs of `foldfree approx` (issue 5): 4 meshes × K ∈ {24, 60, 100}, REPS runs each,
 # median total seconds; prints a Markdown table built from the JSON reports.
-# Usage: ci/approx_accept.sh [MESH_DIR] [REPS]   (release binary must be built)
+# Usage: benches/approx_accept.sh [MESH_DIR] [REPS]   (release binary must be built)
 set -eu
-MESHES=${1:-/work/shared/meshes}
+MESHES=${1:-../shared/meshes}
 REPS=${2:-3}
 BIN=target/release/foldfree
 OUT=target/approx-accept
