@@ -333,6 +333,33 @@ struct RenderArgs {
     /// Enable the Khronos validation layer (any message fails the run).
     #[arg(long)]
     validation: bool,
+    /// `checker`: a checkerboard through the UVs (needs `vt`); `normals`: faces coloured by
+    /// their flat normal (any triangle mesh, e.g. `approx` output: planar regions show as
+    /// uniform patches).
+    #[arg(long, value_enum, default_value = "checker")]
+    shade: ShadeArg,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum ShadeArg {
+    Checker,
+    Normals,
+}
+
+/// Per-corner positions, zero UVs and indices of a triangle surface, for `--shade normals`.
+fn surface_corners(
+    path: &std::path::Path,
+) -> foldfree::Result<(Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>)> {
+    let m = mesh::read_obj(path)?;
+    let mut positions = Vec::with_capacity(3 * m.faces.len());
+    for f in &m.faces {
+        for &v in f {
+            let p = m.positions[v as usize];
+            positions.push([p[0] as f32, p[1] as f32, p[2] as f32]);
+        }
+    }
+    let n = positions.len();
+    Ok((positions, vec![[0.0; 2]; n], (0..n as u32).collect()))
 }
 
 fn run_render(args: RenderArgs) -> foldfree::Result<()> {
@@ -343,8 +370,10 @@ fn run_render(args: RenderArgs) -> foldfree::Result<()> {
             "refusing to overwrite the input with the picture".into(),
         ));
     }
-    let obj = read_obj_with_uv(&args.input)?;
-    let (positions, uvs, indices) = obj.corners();
+    let (positions, uvs, indices) = match args.shade {
+        ShadeArg::Checker => read_obj_with_uv(&args.input)?.corners(),
+        ShadeArg::Normals => surface_corners(&args.input)?,
+    };
     let view_dir = match args.view.as_slice() {
         &[x, y, z] if [x, y, z].iter().all(|c| c.is_finite()) && x * x + y * y + z * z > 0.0 => {
             [x, y, z]
@@ -365,6 +394,10 @@ fn run_render(args: RenderArgs) -> foldfree::Result<()> {
         height: args.size,
         checker: args.checker,
         view_dir,
+        shade: match args.shade {
+            ShadeArg::Checker => foldfree::gpu::Shade::Checker,
+            ShadeArg::Normals => foldfree::gpu::Shade::Normals,
+        },
     };
     let rgba = render_checker(&ctx, &positions, &uvs, &indices, &desc)?;
     let messages = ctx.take_validation_messages();
@@ -384,12 +417,15 @@ fn run_render(args: RenderArgs) -> foldfree::Result<()> {
         })?;
     foldfree::viz::write_file(&args.output, &png)?;
     println!(
-        "wrote {} ({}x{}, {} triangles, checker {})",
+        "wrote {} ({}x{}, {} triangles, {})",
         args.output.display(),
         args.size,
         args.size,
         indices.len() / 3,
-        args.checker
+        match args.shade {
+            ShadeArg::Checker => format!("checker {}", args.checker),
+            ShadeArg::Normals => "flat normal colours".to_string(),
+        }
     );
     Ok(())
 }

@@ -259,6 +259,7 @@ fn render_in_process_is_validation_clean() {
             height: 120,
             checker: 6,
             view_dir: [0.0, 0.0, 1.0],
+            shade: Default::default(),
         };
         let rgba = render_checker(ctx, &p, &t, &idx, &desc).expect("render");
         assert_eq!(rgba.len(), 200 * 120 * 4);
@@ -281,4 +282,73 @@ fn render_in_process_is_validation_clean() {
         // Bad input is refused before any GPU work.
         assert!(render_checker(ctx, &p, &t, &[0, 1, 9999], &desc).is_err());
     });
+}
+
+/// Distinct colours among the pixels that are not background.
+fn distinct_foreground(px: &[[u8; 4]]) -> usize {
+    let bg = px[0];
+    px.iter()
+        .filter(|p| **p != bg)
+        .collect::<std::collections::HashSet<_>>()
+        .len()
+}
+
+/// `--shade normals` renders any triangle mesh (no `vt` needed) with one colour per flat
+/// normal: the planar approximation of the block (`foldfree approx -k 24`) shows at most as
+/// many colours as it has planar regions, far fewer than the curved original.
+#[test]
+fn render_normals_of_an_approximation() {
+    if !vulkan_available() {
+        return;
+    }
+    let dir = TempDir::new("normals");
+    let approx = dir.join("block24.obj");
+    let report = dir.join("block24.json");
+    let out = foldfree(&[
+        "approx",
+        data("block.obj").to_str().expect("utf-8 path"),
+        "-k",
+        "24",
+        "-q",
+        "-o",
+        approx.to_str().expect("utf-8 path"),
+        "--report",
+        report.to_str().expect("utf-8 path"),
+    ]);
+    check_ok(&out, "foldfree approx");
+    let regions = serde_json::from_slice::<serde_json::Value>(&fs::read(&report).expect("report"))
+        .expect("json")["k_obtained"]
+        .as_u64()
+        .expect("report.k_obtained") as usize;
+    let render = |input: &Path, name: &str| {
+        let png = dir.join(name);
+        let out = foldfree(&[
+            "render",
+            input.to_str().expect("utf-8 path"),
+            "-o",
+            png.to_str().expect("utf-8 path"),
+            "--shade",
+            "normals",
+            "--size",
+            "256",
+            "--view=1,1,1",
+            "--validation",
+        ]);
+        check_ok(&out, "foldfree render --shade normals");
+        let (w, h, px) = decode(&fs::read(&png).expect("PNG written"));
+        assert_eq!((w, h), (256, 256));
+        let s = stats(w, h, &px);
+        assert!(s.foreground > 0.1, "foreground {:.3}", s.foreground);
+        distinct_foreground(&px)
+    };
+    let flat = render(&approx, "approx.png");
+    let original = render(&data("block.obj"), "original.png");
+    assert!(
+        flat <= regions,
+        "{flat} colours for {regions} planar regions"
+    );
+    assert!(
+        original > 4 * flat,
+        "original {original} vs approximation {flat} colours"
+    );
 }

@@ -8,6 +8,7 @@ layout(push_constant) uniform Push {
     mat4 view_proj;
     vec4 light_dir;  // xyz: unit direction towards the light (world space)
     float checker;   // squares per unit of UV
+    uint shade;      // 0: checker through the UVs, 1: flat normal colours
 } pc;
 
 layout(location = 0) out vec2 out_uv;

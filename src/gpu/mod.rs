@@ -41,7 +41,7 @@ pub use debug::MessageLog;
 pub use error::{map_result, GpuError, GpuResult, INSTALL_HINT};
 pub use pipeline::{ComputePipeline, ComputePipelineDesc, DescriptorSet, DEFAULT_WORKGROUP_SIZE};
 pub use query::TimestampPool;
-pub use render::{render_checker, RenderDesc, BACKGROUND};
+pub use render::{render_checker, RenderDesc, Shade, BACKGROUND};
 
 /// Raw Vulkan types, for hosts that bring their own device ([`Context::from_host`]).
 pub use ash::vk;

@@ -34,6 +34,18 @@ pub struct RenderDesc {
     pub checker: u32,
     /// Direction from the mesh towards the camera (world space; need not be unit length).
     pub view_dir: [f32; 3],
+    pub shade: Shade,
+}
+
+/// What colours the surface.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Shade {
+    /// A checkerboard through the UVs: the texture-mapping check.
+    #[default]
+    Checker,
+    /// Each face coloured by its flat normal: planar regions (an `approx` output, a tet map's
+    /// boundary) show as uniform patches; UVs are ignored.
+    Normals,
 }
 
 impl Default for RenderDesc {
@@ -43,6 +55,7 @@ impl Default for RenderDesc {
             height: 1024,
             checker: 16,
             view_dir: [0.0, 0.0, 1.0],
+            shade: Shade::Checker,
         }
     }
 }
@@ -54,7 +67,9 @@ struct Push {
     view_proj: [f32; 16],
     light_dir: [f32; 4],
     checker: f32,
-    _pad: [f32; 3],
+    /// 0: checkerboard through the UVs; 1: flat normal colours (no UVs needed).
+    shade: u32,
+    _pad: [f32; 2],
 }
 
 /// One interleaved vertex: position then UV.
@@ -619,7 +634,11 @@ pub fn render_checker(
         view_proj: view_proj.to_cols_array(),
         light_dir: [light.x, light.y, light.z, 0.0],
         checker: desc.checker.max(1) as f32,
-        _pad: [0.0; 3],
+        shade: match desc.shade {
+            Shade::Checker => 0,
+            Shade::Normals => 1,
+        },
+        _pad: [0.0; 2],
     };
 
     let cmd = obj.cmd;
