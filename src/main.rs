@@ -346,10 +346,11 @@ enum ShadeArg {
     Normals,
 }
 
-/// Per-corner positions, zero UVs and indices of a triangle surface, for `--shade normals`.
-fn surface_corners(
-    path: &std::path::Path,
-) -> foldfree::Result<(Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>)> {
+/// Per-corner positions, UVs and indices: what the render pipeline draws.
+type Corners = (Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>);
+
+/// The corners of a triangle surface with zero UVs, for `--shade normals`.
+fn surface_corners(path: &std::path::Path) -> foldfree::Result<Corners> {
     let m = mesh::read_obj(path)?;
     let mut positions = Vec::with_capacity(3 * m.faces.len());
     for f in &m.faces {
