@@ -22,6 +22,9 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
+    /// Volumetric maps: bad tet mesh / constraints (exit 2) or a failed solve (exit 1).
+    #[error(transparent)]
+    Vol(#[from] crate::vol::VolError),
     /// The request itself is wrong (bad option combination, refusing to overwrite the input).
     #[error("{0}")]
     Usage(String),
@@ -33,6 +36,7 @@ impl Error {
         match self {
             Error::Mesh(_) | Error::Usage(_) => 2,
             Error::Gpu(_) | Error::Solve(_) | Error::Io { .. } => 1,
+            Error::Vol(e) => e.exit_code(),
         }
     }
 }
