@@ -11,14 +11,15 @@
 use std::path::Path;
 
 use super::harmonic::harmonic_extension;
-use super::tet::{cross, dot, TetMesh};
+use super::tet::{cross, dot, is_positive, TetMesh};
+use super::Targets;
 use super::VolError;
 use crate::init::{tutte, TutteWeights};
 use crate::mesh::{Topology, TriMesh};
 
 /// The sphere positions of the boundary vertices (mesh indices) and the number of boundary
 /// triangles whose chordal triangle is not positive seen from the centre.
-pub fn sphere_embedding(mesh: &TetMesh) -> Result<(Vec<(u32, [f64; 3])>, usize), VolError> {
+pub fn sphere_embedding(mesh: &TetMesh) -> Result<(Targets, usize), VolError> {
     let faces = mesh.boundary_faces();
     let verts = mesh.boundary_vertices();
     let mut local = vec![u32::MAX; mesh.positions.len()];
@@ -89,7 +90,7 @@ pub fn sphere_embedding(mesh: &TetMesh) -> Result<(Vec<(u32, [f64; 3])>, usize),
         lf.iter()
             .filter(|f| {
                 let [a, b, c] = f.map(|v| p[v as usize]);
-                !(dot(a, cross(b, c)) > 0.0)
+                !is_positive(dot(a, cross(b, c)))
             })
             .count()
     };
@@ -102,7 +103,7 @@ pub fn sphere_embedding(mesh: &TetMesh) -> Result<(Vec<(u32, [f64; 3])>, usize),
 /// Start map and constraints of the ball target: sphere boundary, harmonic interior.
 pub fn ball_target(
     mesh: &TetMesh,
-) -> Result<(Vec<[f64; 3]>, Vec<(u32, [f64; 3])>, usize), VolError> {
+) -> Result<(Vec<[f64; 3]>, Targets, usize), VolError> {
     let (targets, nbad) = sphere_embedding(mesh)?;
     let zero = vec![[0.0; 3]; mesh.positions.len()];
     let init = harmonic_extension(mesh, &zero, &targets)?;

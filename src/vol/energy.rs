@@ -72,7 +72,7 @@ pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// D(M), +∞ when det M ≤ 0 (the barrier that keeps every tet positive).
 pub fn sym_dirichlet(m: &Mat3) -> f64 {
-    if !(det3(m) > 0.0) {
+    if !super::tet::is_positive(det3(m)) {
         return f64::INFINITY;
     }
     match inv3(m) {
@@ -83,7 +83,7 @@ pub fn sym_dirichlet(m: &Mat3) -> f64 {
 
 /// D(M) and ∂D/∂M = 2M − 2M⁻ᵀM⁻¹M⁻ᵀ; `None` when det M ≤ 0.
 pub fn sym_dirichlet_grad(m: &Mat3) -> Option<(f64, Mat3)> {
-    if !(det3(m) > 0.0) {
+    if !super::tet::is_positive(det3(m)) {
         return None;
     }
     let n = inv3(m)?;
@@ -179,7 +179,7 @@ pub fn sym_dirichlet_eigensystem(m: &Mat3) -> [(f64, Mat3); 9] {
 pub fn closest_rotation(c: &Mat3) -> Option<Mat3> {
     let ctc = mul3(&transpose3(c), c);
     let (l, v) = sym_eigen::<3>(&ctc);
-    if !(l[1] > 1e-24 * l[0].max(f64::MIN_POSITIVE)) || !l[0].is_finite() {
+    if !super::tet::is_positive(l[1] - 1e-24 * l[0].max(f64::MIN_POSITIVE)) || !l[0].is_finite() {
         return None;
     }
     let col = |k: usize| [v[0][k], v[1][k], v[2][k]];

@@ -30,7 +30,7 @@ fn eval(c: &[f64; 4], t: f64) -> f64 {
 /// Smallest t in (0, HORIZON] with c(t) ≤ 0, given c(0) > 0 (∞ when none); the returned
 /// value is the lower end of a bisected bracket, so c is still positive there.
 pub fn first_nonpositive(c: &[f64; 4]) -> f64 {
-    if !(c[0] > 0.0) {
+    if !super::tet::is_positive(c[0]) {
         return 0.0;
     }
     // Critical points: 3c3 t² + 2c2 t + c1 = 0, kept in (0, HORIZON).
@@ -61,7 +61,7 @@ pub fn first_nonpositive(c: &[f64; 4]) -> f64 {
         if eval(c, hi) > 0.0 {
             continue;
         }
-        if !(eval(c, lo) > 0.0) {
+        if !super::tet::is_positive(eval(c, lo)) {
             return lo;
         }
         // c(lo) > 0 ≥ c(hi), monotone in between: bisect.

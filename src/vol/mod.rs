@@ -18,6 +18,9 @@ pub mod tetgen;
 pub mod volmap;
 
 pub use error::VolError;
+
+/// Position constraints: (vertex, target position).
+pub type Targets = Vec<(u32, [f64; 3])>;
 pub use medit::{read_medit, write_medit};
 pub use tet::TetMesh;
 pub use tetgen::{read_any, write_any};

@@ -407,7 +407,7 @@ pub fn newton(
         }
         data = a.into_raw_storage().2;
         let slope: f64 = step.iter().zip(&grad).map(|(p, g)| p * g).sum();
-        if !(slope < 0.0) {
+        if !super::tet::is_positive(-slope) {
             // Not a descent direction (CG broke down): fall back to preconditioned gradient.
             for v in 0..nv as u32 {
                 let k = self_slot(pattern, v);

@@ -35,6 +35,12 @@ pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// `x > 0`, false for NaN: the one orientation test (a NaN volume counts as inverted).
+#[inline]
+pub fn is_positive(x: f64) -> bool {
+    x > 0.0
+}
+
 /// det[b − a, c − a, d − a] = 6 × signed volume.
 #[inline]
 pub fn det6(p: &[[f64; 3]], t: &[u32; 4]) -> f64 {
@@ -71,7 +77,7 @@ impl TetMesh {
     /// Tets with det ≤ 0 (inverted or flat) at `positions`.
     pub fn inverted(&self, positions: &[[f64; 3]]) -> Vec<usize> {
         (0..self.tets.len())
-            .filter(|&t| !(det6(positions, &self.tets[t]) > 0.0))
+            .filter(|&t| !is_positive(det6(positions, &self.tets[t])))
             .collect()
     }
 

@@ -53,9 +53,12 @@ pub fn tetgen_paths(path: &Path) -> (PathBuf, PathBuf) {
     (PathBuf::from(n), PathBuf::from(e))
 }
 
+/// Positions, vertex references (boundary markers) and the first index of a `.node` file.
+pub type NodeFile = (Vec<[f64; 3]>, Vec<i64>, i64);
+
 /// Parses `.node` text: positions and boundary markers (as vertex references), and the index
 /// base.
-pub fn parse_node(text: &str, file: &Path) -> Result<(Vec<[f64; 3]>, Vec<i64>, i64), VolError> {
+pub fn parse_node(text: &str, file: &Path) -> Result<NodeFile, VolError> {
     let recs = records(text);
     let (hl, head) = recs.first().ok_or_else(|| VolError::Truncated {
         file: file.to_path_buf(),
