@@ -28,6 +28,9 @@ pub struct VolmapOptions {
     pub lambda0: f64,
     pub lambda_growth: f64,
     pub max_rounds: usize,
+    /// When a penalty round leaves ρ above half its previous value, continue the penalty
+    /// rounds with the unguided (rest-relative) distortion.
+    pub unguide_on_stall: bool,
     /// Newton settings of the deformation and penalty phases.
     pub newton: NewtonOptions,
     /// Newton settings of the post-optimisation (None: skipped).
@@ -41,7 +44,8 @@ impl Default for VolmapOptions {
             theta: 1e-6,
             lambda0: 1e-3,
             lambda_growth: 1e4,
-            max_rounds: 8,
+            max_rounds: 10,
+            unguide_on_stall: true,
             newton: NewtonOptions::default(),
             post: Some(NewtonOptions {
                 max_iters: 500,
@@ -290,19 +294,38 @@ pub fn volmap(
     // 3. Position constraints: penalty rounds until ρ < θ; after each round try to put the
     // constrained vertices exactly on their targets with one fold-free step.
     let mut snapped = false;
+    let mut unguided = false;
     if !targets.is_empty() {
         obj.lambda = opts.lambda0;
+        let mut rho_prev = position_energy(targets, &x);
         for round in 0..opts.max_rounds {
             if try_snap(&obj, &mut x) {
                 snapped = true;
                 break;
             }
-            let name = format!("constraints {}", round + 1);
+            let name = format!(
+                "constraints {}{}",
+                round + 1,
+                if unguided { " (unguided)" } else { "" }
+            );
             run(&name, &obj, &mut x, &opts.newton, &mut phases)?;
-            if position_energy(targets, &x) < opts.theta {
+            let rho = position_energy(targets, &x);
+            if rho < opts.theta {
                 snapped = try_snap(&obj, &mut x);
                 break;
             }
+            // Stall: the guides of positive init tets next to folded ones pull interior
+            // vertices to the init's side of the fold, against the boundary the penalty
+            // pulls in, and lock them in slivers. Drop the guides (distortion w.r.t. the
+            // rest shape, the post-optimisation energy) and retry at the same λ.
+            if opts.unguide_on_stall && !unguided && rho > 0.5 * rho_prev {
+                unguided = true;
+                obj.d_dist = d_fit.clone();
+                obj.omega = 0.0;
+                rho_prev = rho;
+                continue;
+            }
+            rho_prev = rho;
             obj.lambda *= opts.lambda_growth;
         }
     }
