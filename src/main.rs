@@ -154,6 +154,7 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
     let mut options = foldfree::vol::VolmapOptions::default();
     if let Some(n) = a.max_iters {
         options.newton.max_iters = n;
+        options.penalty.max_iters = n;
         if let Some(p) = options.post.as_mut() {
             p.max_iters = n;
         }

@@ -101,9 +101,7 @@ pub fn sphere_embedding(mesh: &TetMesh) -> Result<(Targets, usize), VolError> {
 }
 
 /// Start map and constraints of the ball target: sphere boundary, harmonic interior.
-pub fn ball_target(
-    mesh: &TetMesh,
-) -> Result<(Vec<[f64; 3]>, Targets, usize), VolError> {
+pub fn ball_target(mesh: &TetMesh) -> Result<(Vec<[f64; 3]>, Targets, usize), VolError> {
     let (targets, nbad) = sphere_embedding(mesh)?;
     let zero = vec![[0.0; 3]; mesh.positions.len()];
     let init = harmonic_extension(mesh, &zero, &targets)?;

@@ -7,6 +7,9 @@
 //! solved by PCG; the step is capped by the largest flip-free step (every tet's det cubic)
 //! and then backtracked until the energy decreases (Armijo). Because every accepted point has
 //! finite energy, and the energy is +∞ on any non-positive tet, no iterate ever inverts a tet.
+//!
+//! Diagnostics: with `FOLDFREE_VOL_TRACE` set, every step prints energy, step, largest
+//! flip-free step, gradient norm and cumulative PCG iterations to stderr.
 
 use rayon::prelude::*;
 use sprs::CsMat;

@@ -33,6 +33,10 @@ pub struct VolmapOptions {
     pub unguide_on_stall: bool,
     /// Newton settings of the deformation and penalty phases.
     pub newton: NewtonOptions,
+    /// Newton settings of the penalty rounds: tighter linear solves, because near the end
+    /// the slivers make the Hessian so ill-conditioned that loose PCG directions run into
+    /// the fold barrier after tiny steps.
+    pub penalty: NewtonOptions,
     /// Newton settings of the post-optimisation (None: skipped).
     pub post: Option<NewtonOptions>,
 }
@@ -47,6 +51,14 @@ impl Default for VolmapOptions {
             max_rounds: 10,
             unguide_on_stall: true,
             newton: NewtonOptions::default(),
+            penalty: NewtonOptions {
+                cg: crate::linalg::cg::CgOptions {
+                    tolerance: 1e-8,
+                    max_iterations: 1500,
+                    preconditioner: crate::linalg::cg::Preconditioner::Ic0,
+                },
+                ..NewtonOptions::default()
+            },
             post: Some(NewtonOptions {
                 max_iters: 500,
                 rel_tol: 1e-6,
@@ -308,7 +320,7 @@ pub fn volmap(
                 round + 1,
                 if unguided { " (unguided)" } else { "" }
             );
-            run(&name, &obj, &mut x, &opts.newton, &mut phases)?;
+            run(&name, &obj, &mut x, &opts.penalty, &mut phases)?;
             let rho = position_energy(targets, &x);
             if rho < opts.theta {
                 snapped = try_snap(&obj, &mut x);
