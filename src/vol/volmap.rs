@@ -29,13 +29,13 @@ pub struct VolmapOptions {
     pub lambda_growth: f64,
     pub max_rounds: usize,
     /// When a penalty round leaves ρ above half its previous value, continue the penalty
-    /// rounds with the unguided (rest-relative) distortion.
+    /// rounds with the unguided (rest-relative) distortion. Off by default: on the armadillo
+    /// it did not release the stall (BENCHMARKS.md).
     pub unguide_on_stall: bool,
     /// Newton settings of the deformation and penalty phases.
     pub newton: NewtonOptions,
-    /// Newton settings of the penalty rounds: tighter linear solves, because near the end
-    /// the slivers make the Hessian so ill-conditioned that loose PCG directions run into
-    /// the fold barrier after tiny steps.
+    /// Newton settings of the penalty rounds (separate so they can be tightened; tighter
+    /// PCG (1e-8, 1500 iterations) did not unlock the armadillo stall, see BENCHMARKS.md).
     pub penalty: NewtonOptions,
     /// Newton settings of the post-optimisation (None: skipped).
     pub post: Option<NewtonOptions>,
@@ -48,17 +48,10 @@ impl Default for VolmapOptions {
             theta: 1e-6,
             lambda0: 1e-3,
             lambda_growth: 1e4,
-            max_rounds: 10,
-            unguide_on_stall: true,
+            max_rounds: 8,
+            unguide_on_stall: false,
             newton: NewtonOptions::default(),
-            penalty: NewtonOptions {
-                cg: crate::linalg::cg::CgOptions {
-                    tolerance: 1e-8,
-                    max_iterations: 1500,
-                    preconditioner: crate::linalg::cg::Preconditioner::Ic0,
-                },
-                ..NewtonOptions::default()
-            },
+            penalty: NewtonOptions::default(),
             post: Some(NewtonOptions {
                 max_iters: 500,
                 rel_tol: 1e-6,
