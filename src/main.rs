@@ -206,6 +206,9 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         if r.run.snapped { " (snapped)" } else { "" },
         r.run.seconds
     );
+    if q.rho >= 1e-6 {
+        eprintln!("  warning: position constraints NOT met (ρ ≥ θ = 1e-6); the map is fold-free");
+    }
     for p in &r.run.phases {
         eprintln!(
             "  {:<20} {:>4} it {:>6} cg  {:>7.2} s  E {:.6e}  ρ {:.3e}",
