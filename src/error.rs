@@ -25,6 +25,9 @@ pub enum Error {
     /// Planar approximation failed (bad input: 2, solver: 1).
     #[error(transparent)]
     Approx(#[from] crate::approx::ApproxError),
+    /// Volumetric maps: bad tet mesh / constraints (exit 2) or a failed solve (exit 1).
+    #[error(transparent)]
+    Vol(#[from] crate::vol::VolError),
     /// The request itself is wrong (bad option combination, refusing to overwrite the input).
     #[error("{0}")]
     Usage(String),
@@ -37,6 +40,7 @@ impl Error {
             Error::Mesh(_) | Error::Usage(_) => 2,
             Error::Gpu(_) | Error::Solve(_) | Error::Io { .. } => 1,
             Error::Approx(e) => e.exit_code(),
+            Error::Vol(e) => e.exit_code(),
         }
     }
 }

@@ -18,5 +18,6 @@ pub mod param;
 pub mod pipeline;
 pub mod report;
 pub mod viz;
+pub mod vol;
 
 pub use error::{Error, Result};

@@ -58,6 +58,217 @@ enum Command {
         #[arg(long, default_value = "target/bench-out")]
         out_dir: PathBuf,
     },
+    /// Foldover-free volumetric map of a tet mesh (Xu & Liu 2022).
+    Volmap(Box<VolmapArgs>),
+    /// Write a constraints file (`vertex x y z`) twisting part of a tet mesh's boundary.
+    VolmapConstraints(VolConstraintArgs),
+    /// Check a tet map against its rest mesh: inverted tets, δ_t, ρ (exit 1 if inverted).
+    Volcheck(VolcheckArgs),
+}
+
+#[derive(clap::Args)]
+struct VolmapArgs {
+    /// Rest tet mesh (.mesh, or TetGen .node/.ele).
+    rest: PathBuf,
+    /// Initial map (same tets; may contain inverted tets).
+    #[arg(long)]
+    init: Option<PathBuf>,
+    /// Constraints: the init's boundary vertices stay where they are.
+    #[arg(long, conflicts_with_all = ["constraints", "target"])]
+    fix_boundary: bool,
+    /// Constraints file: lines `vertex_index x y z` (0-based).
+    #[arg(long, conflicts_with = "target")]
+    constraints: Option<PathBuf>,
+    /// Target shape: `ball` maps the boundary onto the unit sphere.
+    #[arg(long, value_parser = ["ball"])]
+    target: Option<String>,
+    /// Output tet mesh (.mesh, or .node for TetGen).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Write the JSON report here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Newton iteration cap per phase.
+    #[arg(long)]
+    max_iters: Option<usize>,
+    /// Skip the post-optimisation.
+    #[arg(long)]
+    no_post: bool,
+    /// Growth of the penalty weight λ_S per converged round.
+    #[arg(long)]
+    lambda_growth: Option<f64>,
+    /// Cap on penalty rounds.
+    #[arg(long)]
+    max_rounds: Option<usize>,
+    /// Relative residual of the Newton systems' PCG solves.
+    #[arg(long)]
+    cg_tol: Option<f64>,
+    /// PCG preconditioner of the Newton systems.
+    #[arg(long, value_parser = ["jacobi", "ic0", "amg"])]
+    precond: Option<String>,
+    /// No progress display.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(clap::Args)]
+struct VolConstraintArgs {
+    /// Rest tet mesh.
+    rest: PathBuf,
+    /// Output constraints file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Twist angle (degrees) of the far end about the longest bounding-box axis.
+    #[arg(long, default_value_t = 60.0, allow_hyphen_values = true)]
+    twist: f64,
+    /// Fraction of the length held at each end (near end fixed, far end twisted).
+    #[arg(long, default_value_t = 0.15)]
+    fraction: f64,
+}
+
+#[derive(clap::Args)]
+struct VolcheckArgs {
+    /// The map to check (same tets as the rest mesh).
+    map: PathBuf,
+    /// Rest tet mesh.
+    #[arg(long)]
+    rest: PathBuf,
+    /// Measure ρ against the boundary of this init map.
+    #[arg(long)]
+    init: Option<PathBuf>,
+    /// Measure ρ against this constraints file.
+    #[arg(long, conflicts_with = "init")]
+    constraints: Option<PathBuf>,
+}
+
+fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
+    use foldfree::vol::job::{run_volmap_job, ConstraintSource, VolmapJob};
+    let constraints = match (a.fix_boundary, a.constraints, a.target) {
+        (true, None, None) => ConstraintSource::FixBoundary,
+        (false, Some(p), None) => ConstraintSource::File(p),
+        (false, None, Some(_)) => ConstraintSource::Ball,
+        _ => {
+            return Err(foldfree::Error::Usage(
+                "volmap needs one of --fix-boundary, --constraints FILE, --target ball".into(),
+            ))
+        }
+    };
+    let mut options = foldfree::vol::VolmapOptions::default();
+    if let Some(n) = a.max_iters {
+        options.newton.max_iters = n;
+        options.penalty.max_iters = n;
+        if let Some(p) = options.post.as_mut() {
+            p.max_iters = n;
+        }
+    }
+    let pre = match a.precond.as_deref() {
+        Some("jacobi") => Some(foldfree::linalg::cg::Preconditioner::Jacobi),
+        Some("ic0") => Some(foldfree::linalg::cg::Preconditioner::Ic0),
+        Some(_) => Some(foldfree::linalg::cg::Preconditioner::Amg { block_size: 3 }),
+        None => None,
+    };
+    for n in std::iter::once(&mut options.newton).chain(options.post.as_mut()) {
+        if let Some(t) = a.cg_tol {
+            n.cg.tolerance = t;
+        }
+        if let Some(p) = pre {
+            n.cg.preconditioner = p;
+        }
+    }
+    if a.no_post {
+        options.post = None;
+    }
+    if let Some(g) = a.lambda_growth {
+        options.lambda_growth = g;
+    }
+    if let Some(r) = a.max_rounds {
+        options.max_rounds = r;
+    }
+    let job = VolmapJob {
+        rest: a.rest,
+        init: a.init,
+        constraints,
+        output: a.output,
+        report: a.report,
+        quiet: a.quiet,
+        options,
+    };
+    let r = run_volmap_job(&job)?;
+    let q = &r.written;
+    eprintln!(
+        "foldfree volmap: {} tets, inverted init {} → output {}; δ_t {:.4} (free tets {:.4}, {} pinned), max {:.3e}, ρ {:.3e}{}, {:.2} s",
+        q.tets,
+        r.run.inverted_init,
+        q.inverted,
+        q.delta_t,
+        q.delta_t_free,
+        q.pinned_tets,
+        q.max_distortion,
+        q.rho,
+        if r.run.snapped { " (snapped)" } else { "" },
+        r.run.seconds
+    );
+    if q.rho >= 1e-6 {
+        eprintln!("  warning: position constraints NOT met (ρ ≥ θ = 1e-6); the map is fold-free");
+    }
+    for p in &r.run.phases {
+        eprintln!(
+            "  {:<20} {:>4} it {:>6} cg  {:>7.2} s  E {:.6e}  ρ {:.3e}",
+            p.name, p.iterations, p.cg_iterations, p.seconds, p.energy, p.rho
+        );
+    }
+    Ok(())
+}
+
+fn run_volmap_constraints(a: VolConstraintArgs) -> foldfree::Result<()> {
+    use foldfree::vol::constraints::{constraints_text, twist_constraints};
+    let rest = foldfree::vol::job::read_rest(&a.rest)?;
+    if !(0.0..0.5).contains(&a.fraction) || !a.twist.is_finite() {
+        return Err(foldfree::Error::Usage(
+            "--fraction must be in [0, 0.5) and --twist finite".into(),
+        ));
+    }
+    let c = twist_constraints(&rest, a.twist, a.fraction);
+    let header = format!(
+        "foldfree volmap-constraints {} --twist {} --fraction {}\nvertex_index x y z (0-based)",
+        a.rest.display(),
+        a.twist,
+        a.fraction
+    );
+    foldfree::mesh::write_atomic(&a.output, constraints_text(&c, &header).as_bytes()).map_err(
+        |source| foldfree::Error::Io {
+            path: a.output.clone(),
+            source,
+        },
+    )?;
+    eprintln!(
+        "wrote {} ({} constrained vertices)",
+        a.output.display(),
+        c.len()
+    );
+    Ok(())
+}
+
+fn run_volcheck(a: VolcheckArgs) -> foldfree::Result<()> {
+    use foldfree::vol::job::{constraints_for, read_map, read_rest, ConstraintSource};
+    let rest = read_rest(&a.rest)?;
+    let x = read_map(&rest, &a.rest, &a.map)?;
+    let targets = match (&a.init, &a.constraints) {
+        (Some(p), _) => {
+            let init = read_map(&rest, &a.rest, p)?;
+            constraints_for(&rest, Some(&init), &ConstraintSource::FixBoundary)?
+        }
+        (None, Some(p)) => constraints_for(&rest, None, &ConstraintSource::File(p.clone()))?,
+        (None, None) => Vec::new(),
+    };
+    let q = foldfree::vol::evaluate(&rest, &x, &targets);
+    println!("{}", serde_json::to_string_pretty(&q).unwrap_or_default());
+    if q.inverted > 0 {
+        return Err(foldfree::Error::Vol(foldfree::vol::VolError::BadResult(
+            format!("{}: {} inverted tet(s)", a.map.display(), q.inverted),
+        )));
+    }
+    Ok(())
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -771,6 +982,9 @@ fn main() -> ExitCode {
             max_iters,
             out_dir,
         } => run_bench(meshes, energy, backend, max_iters, out_dir),
+        Command::Volmap(args) => run_volmap(*args),
+        Command::VolmapConstraints(args) => run_volmap_constraints(args),
+        Command::Volcheck(args) => run_volcheck(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,109 @@
+//! The unit-ball target: the boundary surface onto the unit sphere, the interior harmonic.
+//!
+//! Spherical embedding of a genus-0 surface: remove one vertex's star (leaving a disk),
+//! Tutte-embed the disk in the unit disk (bijective, Tutte 1963), and lift it to the sphere by
+//! inverse stereographic projection with the removed vertex at the pole. Stereographic
+//! projection is a conformal bijection, so the spherical triangles keep their orientation; a
+//! scale s of the disk (a Möbius dilation) is chosen by bisection so the vertices' mean height
+//! is 0, otherwise the Tutte map crowds everything near one pole. Chordal (flat) triangles of
+//! a fine embedding are positive seen from the centre; the few that may not be are counted.
+
+use std::path::Path;
+
+use super::harmonic::harmonic_extension;
+use super::tet::{cross, dot, is_positive, TetMesh};
+use super::Targets;
+use super::VolError;
+use crate::init::{tutte, TutteWeights};
+use crate::mesh::{Topology, TriMesh};
+
+/// The sphere positions of the boundary vertices (mesh indices) and the number of boundary
+/// triangles whose chordal triangle is not positive seen from the centre.
+pub fn sphere_embedding(mesh: &TetMesh) -> Result<(Targets, usize), VolError> {
+    let faces = mesh.boundary_faces();
+    let verts = mesh.boundary_vertices();
+    let mut local = vec![u32::MAX; mesh.positions.len()];
+    for (i, &v) in verts.iter().enumerate() {
+        local[v as usize] = i as u32;
+    }
+    let lf: Vec<[u32; 3]> = faces.iter().map(|f| f.map(|v| local[v as usize])).collect();
+    let lp: Vec<[f64; 3]> = verts.iter().map(|&v| mesh.positions[v as usize]).collect();
+    let surf = TriMesh {
+        positions: lp.clone(),
+        faces: lf.clone(),
+    };
+    let topo = Topology::build(&surf, Path::new("<boundary surface>"))
+        .map_err(|e| VolError::Input(format!("boundary surface: {e}")))?;
+    if topo.components != 1 || !topo.boundary_loops.is_empty() || topo.genus() != Some(0) {
+        return Err(VolError::Input(format!(
+            "--target ball needs a connected genus-0 boundary surface; this one is {}",
+            topo.describe()
+        )));
+    }
+    // Pole: the vertex of highest degree (its removal leaves the roundest hole).
+    let pole = (0..lp.len() as u32)
+        .max_by_key(|&v| topo.vertex_faces(v).len())
+        .unwrap_or(0);
+    let disk: Vec<[u32; 3]> = lf.iter().copied().filter(|f| !f.contains(&pole)).collect();
+    let dmesh = TriMesh {
+        positions: lp.clone(),
+        faces: disk.clone(),
+    };
+    let dtopo = Topology::build(&dmesh, Path::new("<boundary surface minus a star>"))
+        .map_err(|e| VolError::Input(format!("boundary surface: {e}")))?;
+    let Some(lp_loop) = dtopo.boundary_loops.first() else {
+        return Err(VolError::Input(
+            "boundary surface: no disk after removing a star".into(),
+        ));
+    };
+    let uv = tutte(&lp, &disk, lp_loop, TutteWeights::MeanValue)?;
+    let lift = |s: f64, mirror: bool| -> Vec<[f64; 3]> {
+        (0..lp.len())
+            .map(|i| {
+                if i as u32 == pole {
+                    return [0.0, 0.0, 1.0];
+                }
+                let a = s * uv[i][0];
+                let b = s * uv[i][1] * if mirror { -1.0 } else { 1.0 };
+                let r2 = a * a + b * b;
+                [
+                    2.0 * a / (1.0 + r2),
+                    2.0 * b / (1.0 + r2),
+                    (r2 - 1.0) / (r2 + 1.0),
+                ]
+            })
+            .collect()
+    };
+    let mean_z = |p: &[[f64; 3]]| p.iter().map(|q| q[2]).sum::<f64>() / p.len() as f64;
+    // Mean height grows with s: bisect log s.
+    let (mut lo, mut hi) = (-12.0f64, 12.0f64);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if mean_z(&lift(mid.exp(), false)) > 0.0 {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    let s = (0.5 * (lo + hi)).exp();
+    let bad = |p: &[[f64; 3]]| {
+        lf.iter()
+            .filter(|f| {
+                let [a, b, c] = f.map(|v| p[v as usize]);
+                !is_positive(dot(a, cross(b, c)))
+            })
+            .count()
+    };
+    let (p0, p1) = (lift(s, false), lift(s, true));
+    let (b0, b1) = (bad(&p0), bad(&p1));
+    let (pos, nbad) = if b0 <= b1 { (p0, b0) } else { (p1, b1) };
+    Ok((verts.iter().zip(pos).map(|(&v, p)| (v, p)).collect(), nbad))
+}
+
+/// Start map and constraints of the ball target: sphere boundary, harmonic interior.
+pub fn ball_target(mesh: &TetMesh) -> Result<(Vec<[f64; 3]>, Targets, usize), VolError> {
+    let (targets, nbad) = sphere_embedding(mesh)?;
+    let zero = vec![[0.0; 3]; mesh.positions.len()];
+    let init = harmonic_extension(mesh, &zero, &targets)?;
+    Ok((init, targets, nbad))
+}

@@ -1,0 +1,79 @@
+//! Errors of the volumetric pipeline. Input problems carry the file and the line or tet so a
+//! user can find them; they map to exit code 2, solver / output failures to 1.
+
+use std::path::PathBuf;
+
+/// Anything the volumetric pipeline can fail with.
+#[derive(Debug, thiserror::Error)]
+pub enum VolError {
+    /// A syntax problem at a known line (1-based).
+    #[error("{}:{line}: {msg}", file.display())]
+    Parse {
+        file: PathBuf,
+        line: usize,
+        msg: String,
+    },
+    /// The file ended before a section announced as complete.
+    #[error("{}:{line}: file truncated: {what}", file.display())]
+    Truncated {
+        file: PathBuf,
+        line: usize,
+        what: String,
+    },
+    /// A tet names a vertex that does not exist.
+    #[error("{}:{line}: tet {tet} uses vertex index {index}, but there are {count} vertices", file.display())]
+    BadIndex {
+        file: PathBuf,
+        line: usize,
+        tet: usize,
+        index: i64,
+        count: usize,
+    },
+    /// A coordinate is NaN or infinite.
+    #[error("{}:{line}: vertex {vertex} has a non-finite coordinate", file.display())]
+    NonFinite {
+        file: PathBuf,
+        line: usize,
+        vertex: usize,
+    },
+    /// A rest tet has negative volume (the rest shape must be a valid embedding).
+    #[error("{}: rest tet {tet} is inverted (signed volume {volume:.3e})", file.display())]
+    InvertedRest {
+        file: PathBuf,
+        tet: usize,
+        volume: f64,
+    },
+    /// A rest tet has (numerically) zero volume: its Jacobian is undefined.
+    #[error("{}: rest tet {tet} has zero volume ({volume:.3e})", file.display())]
+    ZeroVolume {
+        file: PathBuf,
+        tet: usize,
+        volume: f64,
+    },
+    /// Two meshes that must share connectivity (rest and init) do not, or the request is wrong.
+    #[error("{0}")]
+    Input(String),
+    /// Reading or writing a file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A linear solve failed.
+    #[error(transparent)]
+    Solve(#[from] crate::linalg::SolveError),
+    /// The result is unusable (inverted tets, NaN); it is not written.
+    #[error("{0}")]
+    BadResult(String),
+}
+
+impl VolError {
+    /// 2 for bad input, 1 for failures of the solver or the file system.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            VolError::Io { .. } | VolError::Solve(_) | VolError::BadResult(_) => 1,
+            _ => 2,
+        }
+    }
+}

@@ -1,0 +1,201 @@
+//! The tetrahedral mesh and the checks every stage relies on: orientation (signed volumes),
+//! the boundary surface (tet faces used once) and located validation of a rest shape.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use super::VolError;
+
+/// A tetrahedral mesh: positions and 0-based tets. MEDIT reference numbers are kept so a
+/// written file carries the input's labels.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TetMesh {
+    pub positions: Vec<[f64; 3]>,
+    pub tets: Vec<[u32; 4]>,
+    pub vertex_refs: Vec<i64>,
+    pub tet_refs: Vec<i64>,
+}
+
+#[inline]
+pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline]
+pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[inline]
+pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// `x > 0`, false for NaN: the one orientation test (a NaN volume counts as inverted).
+#[inline]
+pub fn is_positive(x: f64) -> bool {
+    x > 0.0
+}
+
+/// det[b − a, c − a, d − a] = 6 × signed volume.
+#[inline]
+pub fn det6(p: &[[f64; 3]], t: &[u32; 4]) -> f64 {
+    let a = p[t[0] as usize];
+    let e1 = sub(p[t[1] as usize], a);
+    let e2 = sub(p[t[2] as usize], a);
+    let e3 = sub(p[t[3] as usize], a);
+    dot(e1, cross(e2, e3))
+}
+
+impl TetMesh {
+    /// Builds a mesh without labels (all references 0).
+    pub fn new(positions: Vec<[f64; 3]>, tets: Vec<[u32; 4]>) -> TetMesh {
+        let nv = positions.len();
+        let nt = tets.len();
+        TetMesh {
+            positions,
+            tets,
+            vertex_refs: vec![0; nv],
+            tet_refs: vec![0; nt],
+        }
+    }
+
+    /// Signed volume of tet `t` at `positions` (which may be a map of this mesh).
+    pub fn volume_at(&self, positions: &[[f64; 3]], t: usize) -> f64 {
+        det6(positions, &self.tets[t]) / 6.0
+    }
+
+    /// Bounding-box diagonal of the positions (scale for relative tolerances).
+    pub fn bbox_diagonal(&self) -> f64 {
+        bbox_diagonal(&self.positions)
+    }
+
+    /// Tets with det ≤ 0 (inverted or flat) at `positions`.
+    pub fn inverted(&self, positions: &[[f64; 3]]) -> Vec<usize> {
+        (0..self.tets.len())
+            .filter(|&t| !is_positive(det6(positions, &self.tets[t])))
+            .collect()
+    }
+
+    /// Rejects a rest shape with a flat or inverted tet: the Jacobians (and the energy) are
+    /// defined relative to it, so one bad tet poisons the whole problem. Flat means volume
+    /// ≤ 1e-15·diag³ (far below any real mesh's smallest tet, far above round-off).
+    pub fn check_rest(&self, file: &Path) -> Result<(), VolError> {
+        let d = self.bbox_diagonal();
+        let eps = 1e-15 * d * d * d;
+        for (t, tet) in self.tets.iter().enumerate() {
+            let v = det6(&self.positions, tet) / 6.0;
+            if !v.is_finite() || v.abs() <= eps {
+                return Err(VolError::ZeroVolume {
+                    file: file.to_path_buf(),
+                    tet: t,
+                    volume: v,
+                });
+            }
+            if v < 0.0 {
+                return Err(VolError::InvertedRest {
+                    file: file.to_path_buf(),
+                    tet: t,
+                    volume: v,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Boundary triangles (tet faces used by exactly one tet), oriented outward for a
+    /// positively oriented tet.
+    pub fn boundary_faces(&self) -> Vec<[u32; 3]> {
+        let mut count: HashMap<[u32; 3], (u32, [u32; 3])> = HashMap::new();
+        for t in &self.tets {
+            let [a, b, c, d] = *t;
+            // Outward faces of a positive tet (a, b, c, d).
+            for f in [[b, c, d], [a, d, c], [a, b, d], [a, c, b]] {
+                let mut k = f;
+                k.sort_unstable();
+                count.entry(k).or_insert((0, f)).0 += 1;
+            }
+        }
+        let mut out: Vec<[u32; 3]> = count
+            .into_values()
+            .filter(|(n, _)| *n == 1)
+            .map(|(_, f)| f)
+            .collect();
+        // Deterministic order regardless of the hash map's.
+        out.sort_unstable();
+        out
+    }
+
+    /// Vertices on the boundary surface, ascending.
+    pub fn boundary_vertices(&self) -> Vec<u32> {
+        let mut on = vec![false; self.positions.len()];
+        for f in self.boundary_faces() {
+            for v in f {
+                on[v as usize] = true;
+            }
+        }
+        (0..on.len() as u32).filter(|&v| on[v as usize]).collect()
+    }
+}
+
+/// Bounding-box diagonal of a point set (0 for an empty set).
+pub fn bbox_diagonal(p: &[[f64; 3]]) -> f64 {
+    if p.is_empty() {
+        return 0.0;
+    }
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for q in p {
+        for k in 0..3 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    }
+    let d = sub(hi, lo);
+    dot(d, d).sqrt()
+}
+
+/// Checks that `tets` index inside `nv` vertices (for meshes built in code, not read).
+pub fn check_indices(tets: &[[u32; 4]], nv: usize, file: &Path) -> Result<(), VolError> {
+    for (t, tet) in tets.iter().enumerate() {
+        for &v in tet {
+            if v as usize >= nv {
+                return Err(VolError::BadIndex {
+                    file: file.to_path_buf(),
+                    line: 0,
+                    tet: t,
+                    index: v as i64,
+                    count: nv,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn single_tet_boundary_is_outward() {
+        let m = TetMesh::new(
+            vec![[0., 0., 0.], [1., 0., 0.], [0., 1., 0.], [0., 0., 1.]],
+            vec![[0, 1, 2, 3]],
+        );
+        let f = m.boundary_faces();
+        assert_eq!(f.len(), 4);
+        // Every outward face's normal points away from the centroid.
+        let c = [0.25; 3];
+        for t in f {
+            let p = |i: u32| m.positions[i as usize];
+            let n = cross(sub(p(t[1]), p(t[0])), sub(p(t[2]), p(t[0])));
+            assert!(dot(n, sub(p(t[0]), c)) > 0.0);
+        }
+        assert_eq!(m.boundary_vertices(), vec![0, 1, 2, 3]);
+    }
+}

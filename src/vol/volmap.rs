@@ -1,0 +1,441 @@
+//! The pipeline of Xu & Liu 2022 ("Generation of foldover-free volumetric mapping guided by
+//! Jacobian matrix"): guide Jacobians from an initial map that may fold, a guided deformation
+//! that starts from the (fold-free) rest shape, position constraints by an increasing
+//! penalty, then a distortion-only post-optimisation with the constrained vertices fixed.
+//! Every phase runs [`newton`] from a fold-free point with a fold-free line search, so the
+//! result is fold-free by construction (and checked again before it is returned).
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::energy::{inv3, mul3, sym_dirichlet, Mat3, IDENTITY};
+use super::line_search::max_flip_free_step;
+use super::newton::{
+    corner_weights, jacobian, newton, position_energy, NewtonOptions, Objective, Pattern,
+};
+use super::tet::{sub, TetMesh};
+use super::VolError;
+
+/// Parameters of the method (defaults: the paper's).
+#[derive(Clone, Copy, Debug)]
+pub struct VolmapOptions {
+    /// Weight ω of ‖J' − J‖² in the deformation energy.
+    pub omega: f64,
+    /// Target position energy θ.
+    pub theta: f64,
+    /// First penalty weight λ_S and its growth per converged round.
+    pub lambda0: f64,
+    pub lambda_growth: f64,
+    pub max_rounds: usize,
+    /// When a penalty round leaves ρ above half its previous value, continue the penalty
+    /// rounds with the unguided (rest-relative) distortion. Off by default: on the armadillo
+    /// it did not release the stall (BENCHMARKS.md).
+    pub unguide_on_stall: bool,
+    /// Newton settings of the deformation and penalty phases.
+    pub newton: NewtonOptions,
+    /// Newton settings of the penalty rounds (separate so they can be tightened; tighter
+    /// PCG (1e-8, 1500 iterations) did not unlock the armadillo stall, see BENCHMARKS.md).
+    pub penalty: NewtonOptions,
+    /// Newton settings of the post-optimisation (None: skipped).
+    pub post: Option<NewtonOptions>,
+}
+
+impl Default for VolmapOptions {
+    fn default() -> Self {
+        VolmapOptions {
+            omega: 1e-4,
+            theta: 1e-6,
+            lambda0: 1e-3,
+            lambda_growth: 1e4,
+            max_rounds: 8,
+            unguide_on_stall: false,
+            newton: NewtonOptions::default(),
+            penalty: NewtonOptions::default(),
+            post: Some(NewtonOptions {
+                max_iters: 500,
+                rel_tol: 1e-6,
+                ..NewtonOptions::default()
+            }),
+        }
+    }
+}
+
+/// One phase of the run.
+#[derive(Clone, Debug, Serialize)]
+pub struct PhaseReport {
+    pub name: String,
+    pub iterations: usize,
+    pub cg_iterations: usize,
+    pub seconds: f64,
+    /// Objective at the end of the phase.
+    pub energy: f64,
+    /// Penalty weight (penalty rounds only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lambda: Option<f64>,
+    /// Position energy ρ at the end of the phase.
+    pub rho: f64,
+}
+
+/// Distortion and validity of a map of a rest mesh.
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub struct MapQuality {
+    pub tets: usize,
+    /// Tets with det ≤ 0 (or NaN).
+    pub inverted: usize,
+    /// Volume-weighted mean of ‖J‖² + ‖J⁻¹‖² over all tets (∞ if any is inverted).
+    pub delta_t: f64,
+    /// The same over tets with at least one unconstrained vertex.
+    pub delta_t_free: f64,
+    /// Tets whose four vertices are all constrained.
+    pub pinned_tets: usize,
+    /// Largest per-tet ‖J‖² + ‖J⁻¹‖².
+    pub max_distortion: f64,
+    /// Position energy ρ = Σ‖xᵥ − x̃ᵥ‖² over the constraints.
+    pub rho: f64,
+}
+
+/// The JSON report of `foldfree volmap`.
+#[derive(Clone, Debug, Serialize)]
+pub struct VolmapReport {
+    pub vertices: usize,
+    pub tets: usize,
+    pub constrained_vertices: usize,
+    pub inverted_init: usize,
+    pub inverted_output: usize,
+    pub quality: MapQuality,
+    /// Constrained vertices were moved exactly onto their targets (ρ = 0) by a fold-free step.
+    pub snapped: bool,
+    pub phases: Vec<PhaseReport>,
+    pub seconds: f64,
+}
+
+/// Rest-shape data shared by all phases: edge-matrix inverses and volume weights.
+struct Rest {
+    dm_inv: Vec<Mat3>,
+    weight: Vec<f64>,
+}
+
+/// Ds of tet `t` at `x` (columns = edges from corner 0).
+fn edge_matrix(x: &[[f64; 3]], t: &[u32; 4]) -> Mat3 {
+    let a = x[t[0] as usize];
+    let e = [
+        sub(x[t[1] as usize], a),
+        sub(x[t[2] as usize], a),
+        sub(x[t[3] as usize], a),
+    ];
+    let mut m = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            m[r][c] = e[c][r];
+        }
+    }
+    m
+}
+
+fn rest_data(mesh: &TetMesh) -> Result<Rest, VolError> {
+    let mut dm_inv = Vec::with_capacity(mesh.tets.len());
+    let mut vol = Vec::with_capacity(mesh.tets.len());
+    for (i, t) in mesh.tets.iter().enumerate() {
+        let dm = edge_matrix(&mesh.positions, t);
+        let inv = inv3(&dm).ok_or_else(|| {
+            VolError::Input(format!("rest tet {i} is degenerate (singular edge matrix)"))
+        })?;
+        dm_inv.push(inv);
+        vol.push(super::energy::det3(&dm) / 6.0);
+    }
+    let total: f64 = vol.iter().sum();
+    Ok(Rest {
+        dm_inv,
+        weight: vol.iter().map(|v| v / total).collect(),
+    })
+}
+
+/// Per-tet ‖J‖² + ‖J⁻¹‖² of the rest → `x` Jacobian (+∞ when inverted).
+pub fn tet_distortions(mesh: &TetMesh, x: &[[f64; 3]]) -> Vec<f64> {
+    mesh.tets
+        .iter()
+        .map(|t| {
+            let dm = edge_matrix(&mesh.positions, t);
+            match inv3(&dm) {
+                Some(inv) => sym_dirichlet(&mul3(&edge_matrix(x, t), &inv)),
+                None => f64::INFINITY,
+            }
+        })
+        .collect()
+}
+
+/// Measures a map of `mesh` against constraints (independent of the solver's state).
+pub fn evaluate(mesh: &TetMesh, x: &[[f64; 3]], targets: &[(u32, [f64; 3])]) -> MapQuality {
+    let d = tet_distortions(mesh, x);
+    let mut pinned = vec![false; x.len()];
+    for (v, _) in targets {
+        pinned[*v as usize] = true;
+    }
+    let (mut sw, mut s, mut swf, mut sf, mut max) = (0.0, 0.0, 0.0, 0.0, 0.0f64);
+    let mut pinned_tets = 0;
+    for (t, tet) in mesh.tets.iter().enumerate() {
+        let w = mesh.volume_at(&mesh.positions, t);
+        sw += w;
+        s += w * d[t];
+        max = max.max(d[t]);
+        if tet.iter().all(|&v| pinned[v as usize]) {
+            pinned_tets += 1;
+        } else {
+            swf += w;
+            sf += w * d[t];
+        }
+    }
+    MapQuality {
+        tets: mesh.tets.len(),
+        inverted: mesh.inverted(x).len(),
+        delta_t: s / sw,
+        delta_t_free: if swf > 0.0 { sf / swf } else { f64::NAN },
+        pinned_tets,
+        max_distortion: max,
+        rho: position_energy(targets, x),
+    }
+}
+
+/// Runs the method. `init` is the initial map (same vertex count as `rest`, may fold);
+/// `targets` the position constraints. `progress(phase, iteration, energy)` is called after
+/// every Newton step.
+pub fn volmap(
+    rest: &TetMesh,
+    init: &[[f64; 3]],
+    targets: &[(u32, [f64; 3])],
+    opts: &VolmapOptions,
+    progress: &mut dyn FnMut(&str, usize, f64),
+) -> Result<(Vec<[f64; 3]>, VolmapReport), VolError> {
+    let start = Instant::now();
+    let nv = rest.positions.len();
+    if init.len() != nv {
+        return Err(VolError::Input(format!(
+            "the initial map has {} vertices, the rest mesh {nv}",
+            init.len()
+        )));
+    }
+    for (v, p) in targets {
+        if *v as usize >= nv || p.iter().any(|c| !c.is_finite()) {
+            return Err(VolError::Input(format!(
+                "constraint on vertex {v}: index out of range or non-finite target"
+            )));
+        }
+    }
+    let rd = rest_data(rest)?;
+    let pattern = Pattern::new(nv, &rest.tets);
+    let inverted_init = rest.inverted(init).len();
+
+    // 1. Guide Jacobians: the init's where it is positive, the identity elsewhere.
+    let guide: Vec<Mat3> = rest
+        .tets
+        .iter()
+        .zip(&rd.dm_inv)
+        .map(|(t, inv)| {
+            let j = mul3(&edge_matrix(init, t), inv);
+            if super::energy::det3(&j) > 0.0 && inv3(&j).is_some() {
+                j
+            } else {
+                IDENTITY
+            }
+        })
+        .collect();
+    // D(J'·J⁻¹) with J' = Ds·Dm⁻¹: M = Ds·(Dm⁻¹·J⁻¹).
+    let d_dist = rd
+        .dm_inv
+        .iter()
+        .zip(&guide)
+        .map(|(inv, g)| {
+            // inv3 cannot fail: the guide was kept only when invertible.
+            corner_weights(&mul3(inv, &inv3(g).unwrap_or(IDENTITY)))
+        })
+        .collect();
+    let d_fit: Vec<_> = rd.dm_inv.iter().map(corner_weights).collect();
+    let mut obj = Objective {
+        tets: rest.tets.clone(),
+        weight: rd.weight.clone(),
+        d_dist,
+        d_fit: d_fit.clone(),
+        guide,
+        omega: opts.omega,
+        targets: targets.to_vec(),
+        lambda: 0.0,
+        fixed: vec![false; nv],
+    };
+
+    // 2. Deformation from the rest shape.
+    let mut x = rest.positions.clone();
+    let mut phases = Vec::new();
+    let mut run = |name: &str,
+                   obj: &Objective,
+                   x: &mut Vec<[f64; 3]>,
+                   nopts: &NewtonOptions,
+                   phases: &mut Vec<PhaseReport>|
+     -> Result<(), VolError> {
+        let t0 = Instant::now();
+        if std::env::var_os("FOLDFREE_VOL_TRACE").is_some() {
+            eprintln!("== {name} λ {}", obj.lambda);
+        }
+        let s = newton(obj, &pattern, x, nopts, &mut |it, e| progress(name, it, e))?;
+        phases.push(PhaseReport {
+            name: name.to_string(),
+            iterations: s.iterations,
+            cg_iterations: s.cg_iterations,
+            seconds: t0.elapsed().as_secs_f64(),
+            energy: s.energy,
+            lambda: (obj.lambda != 0.0).then_some(obj.lambda),
+            rho: position_energy(&obj.targets, x),
+        });
+        Ok(())
+    };
+    run("deformation", &obj, &mut x, &opts.newton, &mut phases)?;
+    // The deformation energy is blind to translations (and nearly to rotations, ω is tiny),
+    // so the deformed shape sits wherever the rest shape was: move it rigidly onto the
+    // constraints (Kabsch). A proper rigid motion changes no det and no D(J'J⁻¹).
+    if targets.len() >= 3 {
+        rigid_align(&mut x, targets);
+    }
+
+    // 3. Position constraints: penalty rounds until ρ < θ; after each round try to put the
+    // constrained vertices exactly on their targets with one fold-free step.
+    let mut snapped = false;
+    let mut unguided = false;
+    if !targets.is_empty() {
+        obj.lambda = opts.lambda0;
+        let mut rho_prev = position_energy(targets, &x);
+        for round in 0..opts.max_rounds {
+            if try_snap(&obj, &mut x) {
+                snapped = true;
+                break;
+            }
+            let name = format!(
+                "constraints {}{}",
+                round + 1,
+                if unguided { " (unguided)" } else { "" }
+            );
+            run(&name, &obj, &mut x, &opts.penalty, &mut phases)?;
+            let rho = position_energy(targets, &x);
+            if rho < opts.theta {
+                snapped = try_snap(&obj, &mut x);
+                break;
+            }
+            // Stall: the guides of positive init tets next to folded ones pull interior
+            // vertices to the init's side of the fold, against the boundary the penalty
+            // pulls in, and lock them in slivers. Drop the guides (distortion w.r.t. the
+            // rest shape, the post-optimisation energy) and retry at the same λ.
+            if opts.unguide_on_stall && !unguided && rho > 0.5 * rho_prev {
+                unguided = true;
+                obj.d_dist = d_fit.clone();
+                obj.omega = 0.0;
+                rho_prev = rho;
+                continue;
+            }
+            rho_prev = rho;
+            obj.lambda *= opts.lambda_growth;
+        }
+    }
+
+    // 4. Post-optimisation: distortion of the map itself, constrained vertices fixed.
+    if let Some(post) = &opts.post {
+        let mut fixed = vec![false; nv];
+        for (v, _) in targets {
+            fixed[*v as usize] = true;
+        }
+        let post_obj = Objective {
+            tets: rest.tets.clone(),
+            weight: rd.weight.clone(),
+            d_dist: d_fit.clone(),
+            d_fit,
+            guide: vec![IDENTITY; rest.tets.len()],
+            omega: 0.0,
+            targets: targets.to_vec(),
+            lambda: 0.0,
+            fixed,
+        };
+        run("post-optimisation", &post_obj, &mut x, post, &mut phases)?;
+    }
+
+    let quality = evaluate(rest, &x, targets);
+    if quality.inverted > 0 || x.iter().flatten().any(|c| !c.is_finite()) {
+        return Err(VolError::BadResult(format!(
+            "the result has {} inverted tet(s) or a non-finite coordinate; not written",
+            quality.inverted
+        )));
+    }
+    let report = VolmapReport {
+        vertices: nv,
+        tets: rest.tets.len(),
+        constrained_vertices: targets.len(),
+        inverted_init,
+        inverted_output: quality.inverted,
+        quality,
+        snapped,
+        phases,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((x, report))
+}
+
+/// Applies the proper rigid motion that best fits the constrained vertices to their targets
+/// (least squares; Kabsch 1976 with the reflection excluded).
+pub fn rigid_align(x: &mut [[f64; 3]], targets: &[(u32, [f64; 3])]) {
+    let n = targets.len() as f64;
+    let mut cp = [0.0; 3];
+    let mut cq = [0.0; 3];
+    for (v, q) in targets {
+        let p = x[*v as usize];
+        for k in 0..3 {
+            cp[k] += p[k] / n;
+            cq[k] += q[k] / n;
+        }
+    }
+    // C = Σ (q − q̄)(p − p̄)ᵀ; R = U·diag(1, 1, ±1)·Vᵀ for C = UΣVᵀ.
+    let mut c = [[0.0; 3]; 3];
+    for (v, q) in targets {
+        let p = sub(x[*v as usize], cp);
+        let q = sub(*q, cq);
+        for i in 0..3 {
+            for j in 0..3 {
+                c[i][j] += q[i] * p[j];
+            }
+        }
+    }
+    let Some(r) = super::energy::closest_rotation(&c) else {
+        return;
+    };
+    for p in x.iter_mut() {
+        let d = sub(*p, cp);
+        for i in 0..3 {
+            p[i] = cq[i] + r[i][0] * d[0] + r[i][1] * d[1] + r[i][2] * d[2];
+        }
+    }
+}
+
+/// Moves every constrained vertex onto its target if that inverts no tet (checked by the
+/// det cubics and again by the energy); returns whether it did.
+fn try_snap(obj: &Objective, x: &mut [[f64; 3]]) -> bool {
+    let mut p = vec![[0.0; 3]; x.len()];
+    for (v, t) in &obj.targets {
+        p[*v as usize] = sub(*t, x[*v as usize]);
+    }
+    if max_flip_free_step(&obj.tets, x, &p) <= 1.0 {
+        return false;
+    }
+    let mut trial = x.to_vec();
+    for (v, t) in &obj.targets {
+        trial[*v as usize] = *t;
+    }
+    if obj.tet_energy(&trial).is_finite() {
+        x.copy_from_slice(&trial);
+        true
+    } else {
+        false
+    }
+}
+
+/// Jacobian of the rest → `x` map of tet `t` (used by tests and checks).
+pub fn tet_jacobian(rest: &TetMesh, x: &[[f64; 3]], t: usize) -> Option<Mat3> {
+    let tet = &rest.tets[t];
+    let inv = inv3(&edge_matrix(&rest.positions, tet))?;
+    Some(jacobian(x, tet, &corner_weights(&inv)))
+}

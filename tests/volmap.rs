@@ -1,0 +1,345 @@
+//! Volumetric maps (`foldfree::vol`): readers' located errors, the energy's derivatives, and
+//! the pipeline on tiny tet meshes with known answers.
+
+#[path = "common/tempdir.rs"]
+mod tempdir;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use foldfree::vol::energy::mul3;
+use foldfree::vol::newton::{corner_weights, Objective};
+use foldfree::vol::{evaluate, read_any, volmap, write_any, TetMesh, VolError, VolmapOptions};
+use tempdir::TempDir;
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// A tet split into four around an interior vertex (index 4) at its centroid.
+fn star_tet() -> TetMesh {
+    let p = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.25, 0.25, 0.25],
+    ];
+    // Each sub-tet replaces one corner of (0, 1, 2, 3) by 4: orientation kept.
+    let t = vec![[4, 1, 2, 3], [0, 4, 2, 3], [0, 1, 4, 3], [0, 1, 2, 4]];
+    TetMesh::new(p, t)
+}
+
+fn quiet_options() -> VolmapOptions {
+    VolmapOptions::default()
+}
+
+#[test]
+fn identity_stays_identity() {
+    for name in ["single_tet.mesh", "cube_5tets.mesh"] {
+        let m = read_any(&data(name)).unwrap();
+        m.check_rest(&data(name)).unwrap();
+        let targets: Vec<_> = m
+            .boundary_vertices()
+            .into_iter()
+            .map(|v| (v, m.positions[v as usize]))
+            .collect();
+        let (x, r) = volmap(
+            &m,
+            &m.positions,
+            &targets,
+            &quiet_options(),
+            &mut |_, _, _| {},
+        )
+        .unwrap();
+        assert_eq!(r.inverted_output, 0);
+        assert!(
+            (r.quality.delta_t - 6.0).abs() < 1e-9,
+            "{name}: {}",
+            r.quality.delta_t
+        );
+        for (a, b) in x.iter().zip(&m.positions) {
+            for k in 0..3 {
+                assert!((a[k] - b[k]).abs() < 1e-9);
+            }
+        }
+    }
+    // With a free interior vertex the identity is still the optimum.
+    let m = star_tet();
+    let targets: Vec<_> = (0..4).map(|v| (v, m.positions[v as usize])).collect();
+    let (x, r) = volmap(
+        &m,
+        &m.positions,
+        &targets,
+        &quiet_options(),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert!((r.quality.delta_t - 6.0).abs() < 1e-8);
+    assert!((x[4][0] - 0.25).abs() < 1e-6);
+}
+
+#[test]
+fn single_inverted_tet_gets_fixed() {
+    let m = star_tet();
+    // Push the interior vertex through face (1, 2, 3): only tet 0 inverts.
+    let mut init = m.positions.clone();
+    init[4] = [0.5, 0.5, 0.5];
+    assert_eq!(m.inverted(&init), vec![0]);
+    let targets: Vec<_> = (0..4).map(|v| (v, init[v as usize])).collect();
+    let (x, r) = volmap(&m, &init, &targets, &quiet_options(), &mut |_, _, _| {}).unwrap();
+    assert_eq!(r.inverted_init, 1);
+    assert_eq!(m.inverted(&x), Vec::<usize>::new());
+    // The boundary is the identity, so the optimum is the identity: δ_t → 6.
+    assert!(r.quality.delta_t < 6.0 + 1e-4, "{}", r.quality.delta_t);
+    assert!(r.quality.rho < 1e-12);
+}
+
+#[test]
+fn constraints_met_with_known_answer() {
+    // Boundary mapped by the similarity 2·R (R a rotation about z): the optimum is that
+    // similarity everywhere, D = 3·4 + 3/4 per tet, so δ_t = 12.75, the centroid maps to the
+    // centroid.
+    let m = star_tet();
+    let (s, c) = (0.6f64.sin(), 0.6f64.cos());
+    let r = [
+        [2.0 * c, -2.0 * s, 0.0],
+        [2.0 * s, 2.0 * c, 0.0],
+        [0.0, 0.0, 2.0],
+    ];
+    let map = |p: [f64; 3]| {
+        let q = mul3(&r, &[[p[0], 0.0, 0.0], [p[1], 0.0, 0.0], [p[2], 0.0, 0.0]]);
+        [q[0][0] + 1.0, q[1][0] - 2.0, q[2][0] + 0.5]
+    };
+    let targets: Vec<_> = (0..4).map(|v| (v, map(m.positions[v as usize]))).collect();
+    let (x, rep) = volmap(
+        &m,
+        &m.positions,
+        &targets,
+        &quiet_options(),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(rep.inverted_output, 0);
+    assert!(rep.quality.rho < 1e-6, "ρ {}", rep.quality.rho);
+    assert!(
+        (rep.quality.delta_t - 12.75).abs() < 1e-6,
+        "{}",
+        rep.quality.delta_t
+    );
+    let want = map([0.25; 3]);
+    for k in 0..3 {
+        assert!((x[4][k] - want[k]).abs() < 1e-4);
+    }
+}
+
+#[test]
+fn objective_gradient_and_hessian_match_finite_differences() {
+    let m = star_tet();
+    // A guided objective with a non-trivial guide and ω > 0, at a stretched map (every
+    // singular value > 1, so the projected Hessian equals the true one).
+    let guide = [[1.1, 0.1, 0.0], [0.0, 0.9, 0.05], [0.02, 0.0, 1.05]];
+    let ginv = foldfree::vol::energy::inv3(&guide).unwrap();
+    let d_fit: Vec<_> = (0..4)
+        .map(|t| corner_weights(&edge_inverse(&m, t)))
+        .collect();
+    let d_dist: Vec<_> = (0..4)
+        .map(|t| corner_weights(&mul3(&edge_inverse(&m, t), &ginv)))
+        .collect();
+    let obj = Objective {
+        tets: m.tets.clone(),
+        weight: vec![0.25; 4],
+        d_dist,
+        d_fit,
+        guide: vec![guide; 4],
+        omega: 0.3,
+        targets: vec![],
+        lambda: 0.0,
+        fixed: vec![false; 5],
+    };
+    let x: Vec<[f64; 3]> = m
+        .positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            [
+                1.6 * p[0] + 0.01 * i as f64,
+                1.5 * p[1],
+                1.7 * p[2] - 0.01 * i as f64,
+            ]
+        })
+        .collect();
+    for t in 0..4 {
+        let (e, g, h) = obj.tet_local(t, &x).unwrap();
+        let tet = m.tets[t];
+        let eval = |dx: usize, d: f64| {
+            let mut y = x.clone();
+            y[tet[dx / 3] as usize][dx % 3] += d;
+            y
+        };
+        let single = |y: &[[f64; 3]]| {
+            let mut o = obj.clone();
+            o.weight = (0..4).map(|k| if k == t { 0.25 } else { 0.0 }).collect();
+            o.value(y)
+        };
+        assert!((single(&x) - e).abs() < 1e-12 * e.abs().max(1.0));
+        let eps = 1e-6;
+        for i in 0..12 {
+            let fd = (single(&eval(i, eps)) - single(&eval(i, -eps))) / (2.0 * eps);
+            assert!(
+                (fd - g[i]).abs() < 1e-6 * (1.0 + g[i].abs()),
+                "grad {t} {i}: {fd} vs {}",
+                g[i]
+            );
+            let gp = obj.tet_local(t, &eval(i, eps)).unwrap().1;
+            let gm = obj.tet_local(t, &eval(i, -eps)).unwrap().1;
+            for j in 0..12 {
+                let fdh = (gp[j] - gm[j]) / (2.0 * eps);
+                assert!(
+                    (fdh - h[j][i]).abs() < 1e-5 * (1.0 + h[j][i].abs()),
+                    "hess {t} {j} {i}: {fdh} vs {}",
+                    h[j][i]
+                );
+            }
+        }
+    }
+}
+
+fn edge_inverse(m: &TetMesh, t: usize) -> foldfree::vol::energy::Mat3 {
+    let tet = m.tets[t];
+    let p = |k: usize| m.positions[tet[k] as usize];
+    let mut d = [[0.0; 3]; 3];
+    for c in 0..3 {
+        for r in 0..3 {
+            d[r][c] = p(c + 1)[r] - p(0)[r];
+        }
+    }
+    foldfree::vol::energy::inv3(&d).unwrap()
+}
+
+#[test]
+fn reader_errors_are_located() {
+    let dir = TempDir::new("vol_reader_errors");
+    let head = "MeshVersionFormatted 1\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n";
+    let cases: Vec<(&str, String)> = vec![
+        (
+            "nan",
+            format!("{head}0 0 NaN 0\nTetrahedra\n1\n1 2 3 4 0\nEnd\n"),
+        ),
+        (
+            "trunc",
+            format!("{head}0 0 1 0\nTetrahedra\n2\n1 2 3 4 0\n"),
+        ),
+        (
+            "index",
+            format!("{head}0 0 1 0\nTetrahedra\n1\n1 2 3 5 0\nEnd\n"),
+        ),
+        (
+            "inverted",
+            format!("{head}0 0 1 0\nTetrahedra\n1\n1 3 2 4 0\nEnd\n"),
+        ),
+        (
+            "flat",
+            format!("{head}1 1 0 0\nTetrahedra\n1\n1 2 3 4 0\nEnd\n"),
+        ),
+    ];
+    for (name, text) in cases {
+        let p = dir.join(&format!("{name}.mesh"));
+        std::fs::write(&p, text).unwrap();
+        let err = read_any(&p).and_then(|m| m.check_rest(&p));
+        let msg = format!("{:?}", err);
+        match (name, err) {
+            (
+                "nan",
+                Err(VolError::NonFinite {
+                    line: 8, vertex: 3, ..
+                }),
+            ) => {}
+            ("trunc", Err(VolError::Truncated { .. })) => {}
+            (
+                "index",
+                Err(VolError::BadIndex {
+                    line: 11,
+                    tet: 0,
+                    index: 5,
+                    ..
+                }),
+            ) => {}
+            ("inverted", Err(VolError::InvertedRest { tet: 0, .. })) => {}
+            ("flat", Err(VolError::ZeroVolume { tet: 0, .. })) => {}
+            _ => panic!("{name}: unexpected {msg}"),
+        }
+        // Through the CLI: exit code 2 and the file named.
+        let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+            .arg("volmap")
+            .arg(&p)
+            .arg("--init")
+            .arg(&p)
+            .arg("--fix-boundary")
+            .arg("-o")
+            .arg(dir.join("out.mesh"))
+            .arg("-q")
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{name}");
+        assert!(String::from_utf8_lossy(&out.stderr).contains(&format!("{name}.mesh")));
+    }
+}
+
+#[test]
+fn cli_writes_checked_output_and_report() {
+    let dir = TempDir::new("vol_cli");
+    let m = star_tet();
+    let rest = dir.join("rest.mesh");
+    let init = dir.join("init.node");
+    write_any(&rest, &m, &m.positions).unwrap();
+    let mut ip = m.positions.clone();
+    ip[4] = [0.5, 0.5, 0.5];
+    write_any(&init, &m, &ip).unwrap();
+    let out = dir.join("out.mesh");
+    let report = dir.join("r.json");
+    let st = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .args(["volmap"])
+        .arg(&rest)
+        .arg("--init")
+        .arg(&init)
+        .arg("--fix-boundary")
+        .arg("-o")
+        .arg(&out)
+        .arg("--report")
+        .arg(&report)
+        .arg("-q")
+        .status()
+        .unwrap();
+    assert!(st.success());
+    // Independent check from the written file.
+    let written = read_any(&out).unwrap();
+    assert_eq!(m.inverted(&written.positions).len(), 0);
+    let targets: Vec<_> = (0..4).map(|v| (v, ip[v as usize])).collect();
+    let q = evaluate(&m, &written.positions, &targets);
+    assert!(q.rho < 1e-12 && q.delta_t < 6.0 + 1e-4);
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["inverted_init"], 1);
+    assert_eq!(r["inverted_output"], 0);
+    assert!(r["phases"].as_array().unwrap().len() >= 2);
+    // volcheck agrees and exits 0; on the folded init it exits 1.
+    let ok = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("volcheck")
+        .arg(&out)
+        .arg("--rest")
+        .arg(&rest)
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let bad = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("volcheck")
+        .arg(&init)
+        .arg("--rest")
+        .arg(&rest)
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(1));
+}
