@@ -153,13 +153,15 @@ pub fn parse_medit(text: &str, file: &Path) -> Result<TetMesh, VolError> {
                 let (n, count_line) = tk.parse::<usize>(&format!("the record count of {kw}"))?;
                 match size {
                     Some(k) => {
-                        for _ in 0..n * k {
+                        // A count near usize::MAX cannot be in the file: the loop ends at the
+                        // first missing token, so saturating is enough (no overflow panic).
+                        for _ in 0..n.saturating_mul(k) {
                             tk.next(&format!("a {kw} record"))?;
                         }
                     }
                     None => {
                         // Unknown section: one record per line.
-                        let stop = count_line + n;
+                        let stop = count_line.saturating_add(n);
                         if tk.last_line() < stop {
                             return Err(VolError::Truncated {
                                 file: file.to_path_buf(),

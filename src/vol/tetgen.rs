@@ -87,8 +87,9 @@ pub fn parse_node(text: &str, file: &Path) -> Result<NodeFile, VolError> {
             what: format!("{n} points announced, {} found", recs.len() - 1),
         });
     }
-    let mut pos = Vec::with_capacity(n);
-    let mut refs = Vec::with_capacity(n);
+    // The header count is untrusted: reserve no more than the records present.
+    let mut pos = Vec::with_capacity(n.min(recs.len()));
+    let mut refs = Vec::with_capacity(n.min(recs.len()));
     let mut base = 0;
     for (i, (l, t)) in recs[1..=n].iter().enumerate() {
         let idx: i64 = num(t.first(), file, *l, "a point index")?;
@@ -156,8 +157,8 @@ pub fn parse_ele(
             what: format!("{n} tets announced, {} found", recs.len() - 1),
         });
     }
-    let mut tets = Vec::with_capacity(n);
-    let mut refs = Vec::with_capacity(n);
+    let mut tets = Vec::with_capacity(n.min(recs.len()));
+    let mut refs = Vec::with_capacity(n.min(recs.len()));
     for (ti, (l, t)) in recs[1..=n].iter().enumerate() {
         let mut tet = [0u32; 4];
         for k in 0..4 {
