@@ -88,7 +88,9 @@ pub fn parse_medit(text: &str, file: &Path) -> Result<TetMesh, VolError> {
             }
             "Vertices" => {
                 let (n, _) = tk.parse::<usize>("the vertex count")?;
-                mesh.positions.reserve(n);
+                // The count is untrusted (a fuzzer found 5e8): reserve at most what a file of
+                // this size could hold; the vector grows past that only if records follow.
+                mesh.positions.reserve(n.min(text.len() / 8));
                 for i in 0..n {
                     let mut p = [0.0; 3];
                     let mut l = line;
@@ -112,7 +114,7 @@ pub fn parse_medit(text: &str, file: &Path) -> Result<TetMesh, VolError> {
             }
             "Tetrahedra" => {
                 let (n, _) = tk.parse::<usize>("the tet count")?;
-                mesh.tets.reserve(n);
+                mesh.tets.reserve(n.min(text.len() / 10));
                 for _ in 0..n {
                     let mut t = [0i64; 4];
                     let mut l = line;
