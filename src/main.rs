@@ -546,7 +546,7 @@ struct RenderArgs {
     validation: bool,
     /// `checker`: a checkerboard through the UVs (needs `vt`); `normals`: faces coloured by
     /// their flat normal (any triangle mesh, e.g. `approx` output: planar regions show as
-    /// uniform patches).
+    /// uniform patches; or a tet mesh's boundary surface, `.mesh` / `.node`).
     #[arg(long, value_enum, default_value = "checker")]
     shade: ShadeArg,
 }
@@ -560,9 +560,22 @@ enum ShadeArg {
 /// Per-corner positions, UVs and indices: what the render pipeline draws.
 type Corners = (Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>);
 
-/// The corners of a triangle surface with zero UVs, for `--shade normals`.
+/// The corners of a triangle surface with zero UVs, for `--shade normals`: an OBJ, or the
+/// boundary surface of a tet mesh (`.mesh`, `.node`/`.ele`; e.g. a `volmap` output).
 fn surface_corners(path: &std::path::Path) -> foldfree::Result<Corners> {
-    let m = mesh::read_obj(path)?;
+    let is_tet = matches!(
+        path.extension().and_then(|e| e.to_str()),
+        Some("mesh" | "node" | "ele")
+    );
+    let m = if is_tet {
+        let t = foldfree::vol::tetgen::read_any(path)?;
+        mesh::TriMesh {
+            faces: t.boundary_faces(),
+            positions: t.positions,
+        }
+    } else {
+        mesh::read_obj(path)?
+    };
     let mut positions = Vec::with_capacity(3 * m.faces.len());
     for f in &m.faces {
         for &v in f {

@@ -352,3 +352,36 @@ fn render_normals_of_an_approximation() {
         "original {original} vs approximation {flat} colours"
     );
 }
+
+/// A tet mesh's boundary surface renders too (`.mesh`): the unit cube of 5 tets seen along
+/// (1, 1, 1) shows exactly its three front faces, one flat colour each.
+#[test]
+fn render_normals_of_a_tet_boundary() {
+    if !vulkan_available() {
+        return;
+    }
+    let dir = TempDir::new("tet_boundary");
+    let png = dir.join("cube.png");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_5tets.mesh");
+    let out = foldfree(&[
+        "render",
+        input.to_str().expect("utf-8 path"),
+        "-o",
+        png.to_str().expect("utf-8 path"),
+        "--shade",
+        "normals",
+        "--size",
+        "128",
+        "--view=1,1,1",
+        "--validation",
+    ]);
+    check_ok(&out, "foldfree render cube_5tets.mesh");
+    let (w, h, px) = decode(&fs::read(&png).expect("PNG written"));
+    let s = stats(w, h, &px);
+    assert!(s.foreground > 0.2, "foreground {:.3}", s.foreground);
+    assert_eq!(
+        distinct_foreground(&px),
+        3,
+        "three visible faces, one colour each"
+    );
+}
