@@ -168,6 +168,30 @@ const CASES: &[Case] = &[
         "face 2 is degenerate (area 5.000e-13, below 2.000e-12",
     ),
     valid("needle_face_above_tolerance.obj"),
+    bad("binary_garbage.mesh", ":1: not UTF-8 text (binary file?)"),
+    bad(
+        "empty_0_bytes.mesh",
+        ":1: file truncated: no Vertices section",
+    ),
+    bad(
+        "truncated_vertices.mesh",
+        ":6: file truncated: expected a coordinate",
+    ),
+    bad(
+        "nan_vertex.mesh",
+        ":6: vertex 1 has a non-finite coordinate",
+    ),
+    bad(
+        "tet_index_out_of_range.mesh",
+        ":11: tet 0 uses vertex index 9, but there are 4 vertices",
+    ),
+    bad("tet_index_zero.mesh", ":11: tet 0 uses vertex index 0"),
+    bad(
+        "no_tetrahedra.mesh",
+        "file truncated: no Tetrahedra section",
+    ),
+    bad("inverted_rest_tet.mesh", "rest tet 0 is inverted"),
+    bad("zero_volume_tet.mesh", "rest tet 0 has zero volume"),
     not_disk("two_disjoint_disks.obj"),
     not_disk("closed_tetrahedron.obj"),
     valid("very_long_line.obj"),
@@ -343,8 +367,25 @@ enum Cmd {
     Stats,
 }
 
-/// `foldfree param INPUT -o OUT --init tutte --solver none` or `foldfree stats INPUT`.
+/// `foldfree param INPUT -o OUT --init tutte --solver none` or `foldfree stats INPUT`; for a
+/// tet mesh (`.mesh`) `foldfree volmap INPUT --init INPUT --fix-boundary -o OUT` or
+/// `foldfree volcheck INPUT --rest INPUT`.
 fn run_cmd(cmd: Cmd, input: &Path, out: &Path) -> Result<Run, String> {
+    if input.extension().is_some_and(|e| e == "mesh") {
+        return match cmd {
+            Cmd::Param => run_foldfree(&[
+                Path::new("volmap"),
+                input,
+                Path::new("--init"),
+                input,
+                Path::new("--fix-boundary"),
+                Path::new("-q"),
+                Path::new("-o"),
+                out,
+            ]),
+            Cmd::Stats => run_foldfree(&[Path::new("volcheck"), input, Path::new("--rest"), input]),
+        };
+    }
     match cmd {
         Cmd::Param => run_foldfree(&[
             Path::new("param"),

@@ -58,10 +58,7 @@ pub fn parse_constraints(
 
 /// Reads a constraints file.
 pub fn read_constraints(path: &Path, nv: usize) -> Result<Vec<(u32, [f64; 3])>, VolError> {
-    let text = std::fs::read_to_string(path).map_err(|source| VolError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = super::error::read_text(path)?;
     parse_constraints(&text, path, nv)
 }
 

@@ -77,3 +77,21 @@ impl VolError {
         }
     }
 }
+
+/// Reads a text input file: invalid UTF-8 (a binary file) is bad input at the line of the first
+/// bad byte (exit 2), not an I/O failure.
+pub(crate) fn read_text(path: &std::path::Path) -> Result<String, VolError> {
+    let bytes = std::fs::read(path).map_err(|source| VolError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = 1 + e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count();
+        VolError::Parse {
+            file: path.to_path_buf(),
+            line,
+            msg: "not UTF-8 text (binary file?)".into(),
+        }
+    })
+}

@@ -215,10 +215,7 @@ pub fn parse_medit(text: &str, file: &Path) -> Result<TetMesh, VolError> {
 
 /// Reads a MEDIT `.mesh` file.
 pub fn read_medit(path: &Path) -> Result<TetMesh, VolError> {
-    let text = std::fs::read_to_string(path).map_err(|source| VolError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = super::error::read_text(path)?;
     parse_medit(&text, path)
 }
 

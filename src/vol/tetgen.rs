@@ -190,12 +190,7 @@ pub fn parse_ele(
 /// Reads `.node` + `.ele` (`path` names either, or their stem).
 pub fn read_tetgen(path: &Path) -> Result<TetMesh, VolError> {
     let (np, ep) = tetgen_paths(path);
-    let read = |p: &Path| {
-        std::fs::read_to_string(p).map_err(|source| VolError::Io {
-            path: p.to_path_buf(),
-            source,
-        })
-    };
+    let read = |p: &Path| super::error::read_text(p);
     let (positions, vertex_refs, base) = parse_node(&read(&np)?, &np)?;
     let (tets, tet_refs) = parse_ele(&read(&ep)?, &ep, positions.len(), base)?;
     Ok(TetMesh {
