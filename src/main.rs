@@ -106,10 +106,10 @@ struct VolmapArgs {
     /// PCG preconditioner of the Newton systems.
     #[arg(long, value_parser = ["jacobi", "ic0", "amg"])]
     precond: Option<String>,
-    /// First stage: untangle the init with the constraints held exactly (Garanzha et al.
-    /// 2021) instead of the guided deformation + penalty rounds (used as fallback).
+    /// Skip the default first stage (untangling the init with the constraints held exactly,
+    /// Garanzha et al. 2021) and run the paper's guided deformation + penalty rounds only.
     #[arg(long)]
-    untangle: bool,
+    no_untangle: bool,
     /// No progress display.
     #[arg(short, long)]
     quiet: bool,
@@ -188,8 +188,8 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
     if let Some(r) = a.max_rounds {
         options.max_rounds = r;
     }
-    if a.untangle {
-        options.untangle = Some(Default::default());
+    if a.no_untangle {
+        options.untangle = None;
     }
     let job = VolmapJob {
         rest: a.rest,

@@ -12,7 +12,8 @@
 //! Per tet (J = rest → x Jacobian, D = det J, χ(D, ε) = (D + √(ε² + D²))/2 > 0):
 //! f_ε(J) = (1 − θ)·‖J‖²_F / χ^{2/3} + θ·(D² + 1) / χ,
 //! the first term measuring shape (scale-invariant, ≥ 3 for D > 0 and ε → 0), the second
-//! volume change. The minimiser over free vertices is found by L-BFGS with Armijo
+//! volume change; J is taken against the rest shape scaled to the volume the fixed boundary
+//! encloses, so det J = 1 is attainable on average. The minimiser over free vertices is found by L-BFGS with Armijo
 //! backtracking (the energy is smooth, so no flip-free step cap is needed); ε follows the
 //! paper's schedule, shrinking as the minimum det grows, and becomes negligible once no tet
 //! is inverted.
@@ -62,6 +63,9 @@ pub struct UntangleStats {
     /// Smallest det J over the tets at the end (> 0: untangled).
     pub min_det: f64,
     pub inverted: usize,
+    /// Inverted tets whose four vertices are all fixed: no free move can repair them, so
+    /// the untangler returns at once when there are any.
+    pub inverted_pinned: usize,
     pub eps: f64,
     pub energy: f64,
     pub seconds: f64,
@@ -209,6 +213,25 @@ pub fn untangle(
         vol.push(det3(&dm).abs());
     }
     let total: f64 = vol.iter().sum();
+    // The volume term wants det J = 1, but with the boundary fixed the sum of signed volumes
+    // of x is fixed too (it is the volume the boundary encloses): measure J against the rest
+    // shape scaled to that volume, so that det J = 1 is attainable on average (e.g. a hand
+    // mapped onto a unit ball).
+    let enclosed: f64 = (0..rest.tets.len())
+        .map(|t| super::tet::det6(x, &rest.tets[t]))
+        .sum();
+    let scale = if enclosed > 0.0 && enclosed.is_finite() {
+        (enclosed / total).cbrt()
+    } else {
+        1.0
+    };
+    for c in d.iter_mut() {
+        for row in c.iter_mut() {
+            for v in row.iter_mut() {
+                *v /= scale;
+            }
+        }
+    }
     let prob = Problem {
         tets: &rest.tets,
         d,
@@ -216,6 +239,26 @@ pub fn untangle(
         fixed,
         theta: opts.theta,
     };
+    let inverted_pinned = rest
+        .tets
+        .iter()
+        .filter(|t| {
+            t.iter().all(|&v| fixed[v as usize]) && !super::tet::is_positive(super::tet::det6(x, t))
+        })
+        .count();
+    if inverted_pinned > 0 {
+        if std::env::var_os("FOLDFREE_VOL_TRACE").is_some() {
+            eprintln!("untangle: {inverted_pinned} inverted tet(s) with all corners fixed");
+        }
+        return Ok(UntangleStats {
+            inverted: rest.inverted(x).len(),
+            inverted_pinned,
+            seconds: start.elapsed().as_secs_f64(),
+            ..Default::default()
+        });
+    }
+    // Step scale of the first L-BFGS step: the map's size, not the rest shape's.
+    let diag = super::tet::bbox_diagonal(x);
     let trace = std::env::var_os("FOLDFREE_VOL_TRACE").is_some();
     let n = 3 * nv;
     let min_det = |x: &[[f64; 3]]| prob.dets(x).into_iter().fold(f64::INFINITY, f64::min);
@@ -251,7 +294,7 @@ pub fn untangle(
                 // First step: move the largest vertex by about 1e-3 of the mesh.
                 let gmax = g.iter().fold(0.0f64, |a, v| a.max(v.abs()));
                 if gmax > 0.0 {
-                    1e-3 * rest.bbox_diagonal() / gmax
+                    1e-3 * diag / gmax
                 } else {
                     1.0
                 }
@@ -274,7 +317,7 @@ pub fn untangle(
                 if gmax == 0.0 {
                     break;
                 }
-                let sc = 1e-3 * rest.bbox_diagonal() / gmax;
+                let sc = 1e-3 * diag / gmax;
                 for (q, gv) in dir.iter_mut().zip(&g) {
                     *q = -sc * gv;
                 }
