@@ -39,7 +39,9 @@ pub struct UntangleOptions {
     /// L-BFGS memory.
     pub history: usize,
     /// Stop once no tet is inverted and an outer iteration changed the energy by less than
-    /// this fraction.
+    /// this fraction. Default ∞: stop at the first ε whose minimiser is fold-free — polishing
+    /// further is left to the post-optimisation, which minimises the measured distortion
+    /// itself (rocker arm: same δ_t, 72 s instead of 109 s; armadillo unchanged).
     pub rel_tol: f64,
 }
 
@@ -50,7 +52,7 @@ impl Default for UntangleOptions {
             max_outer: 200,
             max_inner: 200,
             history: 10,
-            rel_tol: 1e-4,
+            rel_tol: f64::INFINITY,
         }
     }
 }
