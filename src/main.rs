@@ -106,6 +106,10 @@ struct VolmapArgs {
     /// PCG preconditioner of the Newton systems.
     #[arg(long, value_parser = ["jacobi", "ic0", "amg"])]
     precond: Option<String>,
+    /// Skip the default first stage (untangling the init with the constraints held exactly,
+    /// Garanzha et al. 2021) and run the paper's guided deformation + penalty rounds only.
+    #[arg(long)]
+    no_untangle: bool,
     /// No progress display.
     #[arg(short, long)]
     quiet: bool,
@@ -183,6 +187,9 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
     }
     if let Some(r) = a.max_rounds {
         options.max_rounds = r;
+    }
+    if a.no_untangle {
+        options.untangle = None;
     }
     let job = VolmapJob {
         rest: a.rest,

@@ -9,6 +9,7 @@ use std::process::Command;
 
 use foldfree::vol::energy::mul3;
 use foldfree::vol::newton::{corner_weights, Objective};
+use foldfree::vol::untangle::{untangle, UntangleOptions};
 use foldfree::vol::{evaluate, read_any, volmap, write_any, TetMesh, VolError, VolmapOptions};
 use tempdir::TempDir;
 
@@ -32,8 +33,12 @@ fn star_tet() -> TetMesh {
     TetMesh::new(p, t)
 }
 
+/// The paper's pipeline only (the untangling stage has its own tests below).
 fn quiet_options() -> VolmapOptions {
-    VolmapOptions::default()
+    VolmapOptions {
+        untangle: None,
+        ..VolmapOptions::default()
+    }
 }
 
 #[test]
@@ -342,4 +347,66 @@ fn cli_writes_checked_output_and_report() {
         .output()
         .unwrap();
     assert_eq!(bad.status.code(), Some(1));
+}
+
+/// The default: untangling first.
+fn untangle_options() -> VolmapOptions {
+    VolmapOptions::default()
+}
+
+#[test]
+fn untangle_stage_repairs_inverted_tet_with_boundary_exact() {
+    // The interior vertex pushed through face (1, 2, 3): tets 0 inverted. The boundary is
+    // the identity, so the untangled + post-optimised map is the identity (δ_t = 6), with
+    // the constrained vertices bit-identical to their targets (ρ = 0, not just small).
+    let m = star_tet();
+    let mut init = m.positions.clone();
+    init[4] = [0.5, 0.5, 0.5];
+    assert_eq!(m.inverted(&init), vec![0]);
+    let targets: Vec<_> = (0..4).map(|v| (v, init[v as usize])).collect();
+    let (x, r) = volmap(&m, &init, &targets, &untangle_options(), &mut |_, _, _| {}).unwrap();
+    assert!(r.phases[0].name.starts_with("untangle (0 inverted"));
+    assert!(r.phases.iter().all(|p| !p.name.starts_with("deformation")));
+    assert_eq!(r.inverted_output, 0);
+    assert_eq!(r.quality.rho, 0.0);
+    for (v, p) in &targets {
+        assert_eq!(x[*v as usize], *p);
+    }
+    assert!(r.quality.delta_t < 6.0 + 1e-4, "{}", r.quality.delta_t);
+    for k in 0..3 {
+        assert!((x[4][k] - 0.25).abs() < 1e-2, "{:?}", x[4]);
+    }
+}
+
+#[test]
+fn untangle_reports_impossible_boundary() {
+    // Corner 3 pushed through the opposite face: the boundary itself is inverted, so no
+    // interior position makes all four tets positive and the untangler must say so
+    // (and leave the fixed vertices alone).
+    let m = star_tet();
+    let mut x = m.positions.clone();
+    x[3] = [0.2, 0.2, -1.0];
+    let fixed = [true, true, true, true, false];
+    let opts = UntangleOptions {
+        max_outer: 20,
+        ..UntangleOptions::default()
+    };
+    let s = untangle(&m, &mut x, &fixed, &opts).unwrap();
+    assert!(s.inverted > 0);
+    assert_eq!(m.inverted(&x).len(), s.inverted);
+    assert_eq!(x[3], [0.2, 0.2, -1.0]);
+    assert_eq!(x[0], [0.0, 0.0, 0.0]);
+}
+
+#[test]
+fn untangle_gives_up_at_once_on_inverted_pinned_tet() {
+    // Same folded boundary, but now every vertex is fixed: the inverted tets have all their
+    // corners fixed and nothing can move, which the untangler reports without iterating.
+    let m = star_tet();
+    let mut x = m.positions.clone();
+    x[3] = [0.2, 0.2, -1.0];
+    let s = untangle(&m, &mut x, &[true; 5], &UntangleOptions::default()).unwrap();
+    assert!(s.inverted_pinned > 0);
+    assert_eq!(s.inverted, m.inverted(&x).len());
+    assert_eq!(s.iterations, 0);
 }

@@ -15,6 +15,7 @@ pub mod medit;
 pub mod newton;
 pub mod tet;
 pub mod tetgen;
+pub mod untangle;
 pub mod volmap;
 
 pub use error::VolError;
