@@ -170,13 +170,16 @@ fn dotv(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
         .sum()
 }
 
+/// One L-BFGS memory entry: step s, gradient change y, 1/(s·y).
+type Pair = (Vec<[f64; 2]>, Vec<[f64; 2]>, f64);
+
 /// L-BFGS (memory 8) with backtracking Armijo steps; returns the final energy.
 fn lbfgs(p: &Problem, x: &mut [[f64; 2]], eps: f64, iterations: usize) -> f64 {
     const MEM: usize = 8;
     let n = x.len();
     let mut g = vec![[0.0; 2]; n];
     let mut e = p.eval(x, eps, Some(&mut g));
-    let mut hist: Vec<(Vec<[f64; 2]>, Vec<[f64; 2]>, f64)> = Vec::new();
+    let mut hist: Vec<Pair> = Vec::new();
     let mut xn = vec![[0.0; 2]; n];
     let mut gn = vec![[0.0; 2]; n];
     for _ in 0..iterations {
