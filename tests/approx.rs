@@ -436,3 +436,49 @@ fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
 }
+
+/// Whole-region untangling (untangle2d): an L-shaped outline fanned around one free vertex.
+/// Its kernel is the unit square at the corner; the uniform Tutte position (mean of the six
+/// outline corners, (11/3, 11/3)) is outside it and inverts two triangles, which is why the
+/// barrier untangler exists. Known answer: no inverted triangle, the free vertex ends in the
+/// kernel, the outline does not move.
+#[test]
+fn untangle_2d_fixes_an_l_shape_fan_that_tutte_folds() {
+    use foldfree::approx::untangle2d::{untangle_2d, Reference, Untangle2dOptions};
+    let outline = [
+        [0.0, 0.0],
+        [10.0, 0.0],
+        [10.0, 1.0],
+        [1.0, 1.0],
+        [1.0, 10.0],
+        [0.0, 10.0],
+    ];
+    let faces: Vec<[usize; 3]> = (0..6).map(|i| [i, (i + 1) % 6, 6]).collect();
+    let p3 = |p: [f64; 2]| [p[0], p[1], 0.0];
+    let refs: Vec<Reference> = faces
+        .iter()
+        .map(|f| {
+            Reference::from_triangle(p3(outline[f[0]]), p3(outline[f[1]]), [0.5, 0.5, 0.0], 1.0)
+                .expect("a fan from (0.5, 0.5) over the L is non-degenerate")
+        })
+        .collect();
+    let mut x: Vec<[f64; 2]> = outline.to_vec();
+    x.push([11.0 / 3.0, 11.0 / 3.0]);
+    let signed = |x: &[[f64; 2]], f: &[usize; 3]| {
+        let (a, b, c) = (x[f[0]], x[f[1]], x[f[2]]);
+        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    };
+    let inverted_before = faces.iter().filter(|f| signed(&x, f) <= 0.0).count();
+    assert_eq!(inverted_before, 2);
+    let mut free = vec![false; 6];
+    free.push(true);
+    let r = untangle_2d(&faces, &refs, &free, &mut x, &Untangle2dOptions::default());
+    assert_eq!(r.inverted, 0);
+    assert!(faces.iter().all(|f| signed(&x, f) > 0.0));
+    let c = x[6];
+    assert!(
+        c[0] > 0.0 && c[0] < 1.0 && c[1] > 0.0 && c[1] < 1.0,
+        "{c:?}"
+    );
+    assert_eq!(&x[..6], &outline[..]);
+}

@@ -18,6 +18,7 @@ pub mod normals_l0;
 pub mod polygons;
 pub mod sparse;
 pub mod untangle;
+pub mod untangle2d;
 pub mod vertex_update;
 
 use std::time::Instant;
@@ -173,6 +174,9 @@ pub struct ApproxReport {
     pub chains_respaced: usize,
     /// Local Tutte repairs run to remove folds.
     pub fold_repairs: usize,
+    /// Regions whose interior was re-embedded or untangled in their plane (see
+    /// `untangle::embed_folded_regions`).
+    pub regions_untangled: usize,
     /// Passes that merged still-folding regions into a neighbour.
     pub merge_passes: usize,
     /// Region merges at corners whose planes meet too far away, and of closed regions left
@@ -446,6 +450,7 @@ pub fn approximate(
         faces_reassigned: reassigned + smoothed,
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
+        regions_untangled: ut.regions_embedded,
         merge_passes,
         corner_merges: corner_merges + collapse_merges,
         vertices_on_4plus_planes: pl.vertices_on_4plus,

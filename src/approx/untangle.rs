@@ -9,12 +9,20 @@
 //! against the rest, in patches of growing radius: an affine combination of points of
 //! the plane stays in the plane, and Tutte's theorem makes it fold-free when the patch
 //! boundary is convex, which small patches usually are (the result is checked again).
+//! Last, every region that still has bad faces is repaired as a whole, region by region (its
+//! interior vertices touch only its own faces, so regions are independent): a Tutte embedding
+//! of its interior against its outline, then, where that still folds (non-convex outlines are
+//! the rule here), the barrier untangler of [`super::untangle2d`] in the region's plane. Each
+//! is kept only when the region has fewer bad faces afterwards. What remains are faces whose
+//! outline itself overlaps: three fixed corners, or an outline that crosses itself in the
+//! plane — no interior placement can fix those.
 
 use sprs::TriMat;
 
 use super::cluster::vertex_clusters;
-use super::geom::{add, dot, face_normals_areas, norm, scale, sub, Plane, V3};
+use super::geom::{add, cross, dot, face_normals_areas, norm, normalize, scale, sub, Plane, V3};
 use super::sparse::solve_spd;
+use super::untangle2d::{untangle_2d, Reference, Untangle2dOptions};
 use crate::linalg::SolveError;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -24,6 +32,8 @@ pub struct Untangled {
     pub chains_respaced: usize,
     /// Local Tutte repairs run (growing patches around bad faces).
     pub patches_embedded: usize,
+    /// Regions whose whole interior was re-embedded (see `embed_folded_regions`).
+    pub regions_embedded: usize,
 }
 
 /// Re-spaces two-region chains and repairs folds locally (see module doc).
@@ -154,7 +164,159 @@ pub fn untangle(
         }
         radius *= 2;
     }
+    out.regions_embedded = embed_folded_regions(
+        topo, faces, fc, planes, &vc, &on_border, input, pos, min_area,
+    )?;
     Ok(out)
+}
+
+/// Whole-region repair: the interior vertices of each region that still has bad faces are
+/// Tutte-embedded against the region's own boundary. Interior vertices touch only their region's
+/// faces, so each region is decided on its own: the embedding is kept when that region ends up
+/// with fewer bad faces (it is fold-free whenever the region's boundary, seen in its plane, is a
+/// convex polygon, and usually when it is a simple one). Returns the regions changed.
+#[allow(clippy::too_many_arguments)]
+fn embed_folded_regions(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &[u32],
+    planes: &[Option<Plane>],
+    vc: &[Vec<u32>],
+    on_border: &[bool],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+) -> Result<usize, SolveError> {
+    let n_regions = planes.len();
+    let mut region_faces: Vec<Vec<usize>> = vec![Vec::new(); n_regions];
+    for (f, &c) in fc.iter().enumerate() {
+        region_faces[c as usize].push(f);
+    }
+    let mut region_free: Vec<Vec<usize>> = vec![Vec::new(); n_regions];
+    for v in 0..pos.len() {
+        if vc[v].len() == 1 && !on_border[v] {
+            region_free[vc[v][0] as usize].push(v);
+        }
+    }
+    let count_bad = |pos: &[V3], r: usize| {
+        let Some(p) = planes[r] else { return 0 };
+        region_faces[r]
+            .iter()
+            .filter(|&&f| {
+                let [a, b, c] = faces[f].map(|v| pos[v as usize]);
+                let n = cross(sub(b, a), sub(c, a));
+                dot(n, p.n) <= 0.0 || 0.5 * norm(n) <= min_area
+            })
+            .count()
+    };
+    let mut changed = 0;
+    for r in 0..n_regions {
+        let before = count_bad(pos, r);
+        if before == 0 || region_free[r].is_empty() {
+            continue;
+        }
+        let saved: Vec<V3> = region_free[r].iter().map(|&v| pos[v]).collect();
+        embed(topo, &region_free[r], vc, planes, pos)?;
+        let after_tutte = count_bad(pos, r);
+        if after_tutte >= before {
+            for (&v, &p) in region_free[r].iter().zip(&saved) {
+                pos[v] = p;
+            }
+        }
+        let best = after_tutte.min(before);
+        if best > 0 {
+            if let Some(p) = planes[r] {
+                let saved2: Vec<V3> = region_free[r].iter().map(|&v| pos[v]).collect();
+                let is_free = |g: usize| vc[g].len() == 1 && !on_border[g];
+                untangle_region(faces, &region_faces[r], &is_free, &p, input, pos);
+                if count_bad(pos, r) >= best {
+                    for (&v, &q) in region_free[r].iter().zip(&saved2) {
+                        pos[v] = q;
+                    }
+                }
+            }
+        }
+        changed += usize::from(count_bad(pos, r) < before);
+    }
+    Ok(changed)
+}
+
+/// Untangles one region in its plane with [`untangle_2d`]: its interior vertices move, its
+/// boundary (shared with other regions or the mesh border) stays. The reference triangles are
+/// the input ones, scaled so that their total area is the region's current signed area in the
+/// plane (the area the untangled layout must cover).
+fn untangle_region(
+    faces: &[[u32; 3]],
+    rf: &[usize],
+    is_free: &dyn Fn(usize) -> bool,
+    p: &Plane,
+    input: &[V3],
+    pos: &mut [V3],
+) {
+    let n = p.n;
+    let axis = if n[0].abs() < 0.6 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
+    let Some(u) = normalize(cross(n, axis)) else {
+        return;
+    };
+    let v = cross(n, u);
+    let origin = scale(n, -p.d);
+    let mut local = std::collections::HashMap::new();
+    let mut global = Vec::new();
+    let lf: Vec<[usize; 3]> = rf
+        .iter()
+        .map(|&f| {
+            faces[f].map(|g| {
+                *local.entry(g as usize).or_insert_with(|| {
+                    global.push(g as usize);
+                    global.len() - 1
+                })
+            })
+        })
+        .collect();
+    let mut x: Vec<[f64; 2]> = global
+        .iter()
+        .map(|&g| {
+            let q = sub(pos[g], origin);
+            [dot(q, u), dot(q, v)]
+        })
+        .collect();
+    let signed: f64 = lf
+        .iter()
+        .map(|f| {
+            let (a, b, c) = (x[f[0]], x[f[1]], x[f[2]]);
+            0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+        })
+        .sum();
+    let input_area: f64 = rf
+        .iter()
+        .map(|&f| {
+            let [a, b, c] = faces[f].map(|g| input[g as usize]);
+            0.5 * norm(cross(sub(b, a), sub(c, a)))
+        })
+        .sum();
+    if signed <= 0.0 || input_area <= 0.0 {
+        return;
+    }
+    let s = (signed / input_area).sqrt();
+    let mut refs = Vec::with_capacity(rf.len());
+    for &f in rf {
+        let [a, b, c] = faces[f].map(|g| input[g as usize]);
+        match Reference::from_triangle(a, b, c, s) {
+            Some(r) => refs.push(r),
+            None => return,
+        }
+    }
+    let free: Vec<bool> = global.iter().map(|&g| is_free(g)).collect();
+    untangle_2d(&lf, &refs, &free, &mut x, &Untangle2dOptions::default());
+    for (i, &g) in global.iter().enumerate() {
+        if free[i] {
+            pos[g] = add(origin, add(scale(u, x[i][0]), scale(v, x[i][1])));
+        }
+    }
 }
 
 /// Faces flipped against their region's plane or with area ≤ `min_area`.

@@ -1,0 +1,392 @@
+//! Untangling of a planar triangle patch with a fixed boundary: the free vertices are moved
+//! (in 2D) to remove inverted triangles.
+//!
+//! A Tutte embedding only untangles when the fixed boundary is convex; the regions of the planar
+//! approximation have long non-convex boundaries (their outlines follow plane–plane lines), so
+//! the interior vertices are instead found by minimising the regularised barrier energy of
+//! Garanzha et al. (2021, "Foldover-free maps in 50 lines of code"): per triangle
+//! `((1-θ)|J|²/2 + θ(det J² + 1)/2) / χ(det J, ε)` with `χ(d, ε) = (d + √(ε² + d²))/2`, which is
+//! finite for inverted triangles while ε > 0; ε is lowered round by round so the minimiser is
+//! pushed to positive determinants. Each round is an L-BFGS minimisation.
+#![forbid(unsafe_code)]
+
+/// Parameters of [`untangle_2d`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Untangle2dOptions {
+    /// Weight of the area term against the conformal (shape) term.
+    pub theta: f64,
+    /// Rounds of "minimise, lower ε".
+    pub max_rounds: usize,
+    /// L-BFGS iterations per round.
+    pub iterations: usize,
+    /// Stop after this many rounds without fewer inverted triangles.
+    pub stall_rounds: usize,
+}
+
+impl Default for Untangle2dOptions {
+    fn default() -> Self {
+        Untangle2dOptions {
+            theta: 1.0 / 128.0,
+            max_rounds: 100,
+            iterations: 300,
+            stall_rounds: 40,
+        }
+    }
+}
+
+/// Outcome of [`untangle_2d`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Untangle2dResult {
+    /// Triangles with determinant ≤ 0 at the end.
+    pub inverted: usize,
+    pub rounds: usize,
+}
+
+/// A triangle's reference shape: the inverse of its 2×2 edge matrix `[r1 r2]` (row-major) and
+/// its area (the energy's weight).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reference {
+    pub inv: [f64; 4],
+    pub area: f64,
+}
+
+impl Reference {
+    /// Reference of the 3D triangle `a b c` scaled by `s` (in its own plane). `None` when it
+    /// is degenerate.
+    pub fn from_triangle(a: [f64; 3], b: [f64; 3], c: [f64; 3], s: f64) -> Option<Reference> {
+        use super::geom::{cross, dot, norm, sub};
+        let e1 = sub(b, a);
+        let e2 = sub(c, a);
+        let l1 = norm(e1);
+        if l1 <= 0.0 {
+            return None;
+        }
+        let x2 = dot(e2, e1) / l1;
+        let y2 = norm(cross(e1, e2)) / l1;
+        // [r1 r2] = s [[l1, x2], [0, y2]]
+        let det = s * s * l1 * y2;
+        if det <= 0.0 || !det.is_finite() {
+            return None;
+        }
+        Some(Reference {
+            inv: [s * y2 / det, -s * x2 / det, 0.0, s * l1 / det],
+            area: 0.5 * det,
+        })
+    }
+}
+
+fn chi(d: f64, eps: f64) -> f64 {
+    0.5 * (d + (eps * eps + d * d).sqrt())
+}
+
+fn chi_deriv(d: f64, eps: f64) -> f64 {
+    0.5 * (1.0 + d / (eps * eps + d * d).sqrt())
+}
+
+/// Jacobian `[e1 e2] · inv` (row-major) of triangle `f`.
+fn jacobian(f: &[usize; 3], r: &Reference, x: &[[f64; 2]]) -> [f64; 4] {
+    let e1 = [x[f[1]][0] - x[f[0]][0], x[f[1]][1] - x[f[0]][1]];
+    let e2 = [x[f[2]][0] - x[f[0]][0], x[f[2]][1] - x[f[0]][1]];
+    let m = r.inv;
+    [
+        e1[0] * m[0] + e2[0] * m[2],
+        e1[0] * m[1] + e2[0] * m[3],
+        e1[1] * m[0] + e2[1] * m[2],
+        e1[1] * m[1] + e2[1] * m[3],
+    ]
+}
+
+fn det2(j: &[f64; 4]) -> f64 {
+    j[0] * j[3] - j[1] * j[2]
+}
+
+struct Problem<'a> {
+    faces: &'a [[usize; 3]],
+    refs: &'a [Reference],
+    free: &'a [bool],
+    theta: f64,
+}
+
+impl Problem<'_> {
+    /// Energy and (when `grad` is given) its gradient, zero on fixed vertices.
+    fn eval(&self, x: &[[f64; 2]], eps: f64, mut grad: Option<&mut [[f64; 2]]>) -> f64 {
+        if let Some(g) = grad.as_deref_mut() {
+            g.iter_mut().for_each(|v| *v = [0.0; 2]);
+        }
+        let th = self.theta;
+        let mut e = 0.0;
+        for (f, r) in self.faces.iter().zip(self.refs) {
+            let j = jacobian(f, r, x);
+            let d = det2(&j);
+            let c = chi(d, eps);
+            let fro = j.iter().map(|v| v * v).sum::<f64>();
+            let a = (1.0 - th) * 0.5 * fro + th * 0.5 * (d * d + 1.0);
+            e += r.area * a / c;
+            let Some(g) = grad.as_deref_mut() else {
+                continue;
+            };
+            let cof = [j[3], -j[2], -j[1], j[0]];
+            let k = -a * chi_deriv(d, eps) / (c * c);
+            let mut gj = [0.0; 4];
+            for i in 0..4 {
+                gj[i] = r.area * (((1.0 - th) * j[i] + th * d * cof[i]) / c + k * cof[i]);
+            }
+            // dE/d[e1 e2] = gj · invᵀ
+            let m = r.inv;
+            let ge1 = [gj[0] * m[0] + gj[1] * m[1], gj[2] * m[0] + gj[3] * m[1]];
+            let ge2 = [gj[0] * m[2] + gj[1] * m[3], gj[2] * m[2] + gj[3] * m[3]];
+            for k in 0..2 {
+                g[f[1]][k] += ge1[k];
+                g[f[2]][k] += ge2[k];
+                g[f[0]][k] -= ge1[k] + ge2[k];
+            }
+        }
+        if let Some(g) = grad {
+            for (gv, &fr) in g.iter_mut().zip(self.free) {
+                if !fr {
+                    *gv = [0.0; 2];
+                }
+            }
+        }
+        e
+    }
+
+    fn min_det(&self, x: &[[f64; 2]]) -> (f64, usize) {
+        let mut m = f64::INFINITY;
+        let mut inv = 0;
+        for (f, r) in self.faces.iter().zip(self.refs) {
+            let d = det2(&jacobian(f, r, x));
+            m = m.min(d);
+            inv += usize::from(d <= 0.0);
+        }
+        (m, inv)
+    }
+}
+
+fn dotv(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| p[0] * q[0] + p[1] * q[1])
+        .sum()
+}
+
+/// One L-BFGS memory entry: step s, gradient change y, 1/(s·y).
+type Pair = (Vec<[f64; 2]>, Vec<[f64; 2]>, f64);
+
+/// L-BFGS (memory 8) with backtracking Armijo steps; returns the final energy.
+fn lbfgs(p: &Problem, x: &mut [[f64; 2]], eps: f64, iterations: usize) -> f64 {
+    const MEM: usize = 8;
+    let n = x.len();
+    let mut g = vec![[0.0; 2]; n];
+    let mut e = p.eval(x, eps, Some(&mut g));
+    let mut hist: Vec<Pair> = Vec::new();
+    let mut xn = vec![[0.0; 2]; n];
+    let mut gn = vec![[0.0; 2]; n];
+    for _ in 0..iterations {
+        let gg = dotv(&g, &g);
+        if gg.sqrt() <= 1e-12 * (1.0 + e.abs()) || !e.is_finite() {
+            break;
+        }
+        // Two-loop recursion: d = -H g.
+        let mut q = g.clone();
+        let mut alphas = Vec::with_capacity(hist.len());
+        for (s, y, rho) in hist.iter().rev() {
+            let a = rho * dotv(s, &q);
+            for (qi, yi) in q.iter_mut().zip(y) {
+                qi[0] -= a * yi[0];
+                qi[1] -= a * yi[1];
+            }
+            alphas.push(a);
+        }
+        if let Some((s, y, _)) = hist.last() {
+            let gamma = dotv(s, y) / dotv(y, y);
+            q.iter_mut().for_each(|v| *v = [v[0] * gamma, v[1] * gamma]);
+        } else {
+            let sc = 1.0 / gg.sqrt().max(1e-300);
+            q.iter_mut().for_each(|v| *v = [v[0] * sc, v[1] * sc]);
+        }
+        for ((s, y, rho), a) in hist.iter().zip(alphas.iter().rev()) {
+            let b = rho * dotv(y, &q);
+            for (qi, si) in q.iter_mut().zip(s) {
+                qi[0] += (a - b) * si[0];
+                qi[1] += (a - b) * si[1];
+            }
+        }
+        let mut slope = -dotv(&g, &q);
+        if slope >= 0.0 {
+            // Not a descent direction: fall back to steepest descent.
+            hist.clear();
+            let sc = 1.0 / gg.sqrt();
+            q = g.iter().map(|v| [v[0] * sc, v[1] * sc]).collect();
+            slope = -dotv(&g, &q);
+        }
+        let mut t = 1.0;
+        let mut accepted = false;
+        for _ in 0..40 {
+            for i in 0..n {
+                xn[i] = [x[i][0] - t * q[i][0], x[i][1] - t * q[i][1]];
+            }
+            let en = p.eval(&xn, eps, Some(&mut gn));
+            if en.is_finite() && en <= e + 1e-4 * t * slope {
+                let s: Vec<[f64; 2]> = (0..n)
+                    .map(|i| [xn[i][0] - x[i][0], xn[i][1] - x[i][1]])
+                    .collect();
+                let y: Vec<[f64; 2]> = (0..n)
+                    .map(|i| [gn[i][0] - g[i][0], gn[i][1] - g[i][1]])
+                    .collect();
+                let sy = dotv(&s, &y);
+                if sy > 1e-300 {
+                    if hist.len() == MEM {
+                        hist.remove(0);
+                    }
+                    hist.push((s, y, 1.0 / sy));
+                }
+                x.copy_from_slice(&xn);
+                g.copy_from_slice(&gn);
+                let de = e - en;
+                e = en;
+                accepted = true;
+                if de <= 1e-14 * e.abs() {
+                    return e;
+                }
+                break;
+            }
+            t *= 0.5;
+        }
+        if !accepted {
+            break;
+        }
+    }
+    e
+}
+
+/// Moves the `free` vertices of `x` to untangle the triangles `faces` (local vertex indices)
+/// against their `refs` (see module doc). Fixed vertices are not touched. Stops as soon as no
+/// triangle is inverted after a round.
+pub fn untangle_2d(
+    faces: &[[usize; 3]],
+    refs: &[Reference],
+    free: &[bool],
+    x: &mut [[f64; 2]],
+    opts: &Untangle2dOptions,
+) -> Untangle2dResult {
+    let p = Problem {
+        faces,
+        refs,
+        free,
+        theta: opts.theta,
+    };
+    let (mut min_det, mut inverted) = p.min_det(x);
+    let mut eps = if min_det > 0.0 {
+        1e-10
+    } else {
+        // Large enough to make every triangle's χ well away from 0 at the start.
+        (1e-8 + 0.04 * min_det * min_det).sqrt().max(1e-3)
+    };
+    let mut e_prev = p.eval(x, eps, None);
+    let mut rounds = 0;
+    // The layout with the fewest inverted triangles is returned; a hopeless patch (its fixed
+    // outline overlaps itself) stops after `stall_rounds` rounds without progress.
+    let mut best = (inverted, x.to_vec());
+    let mut since_best = 0;
+    while rounds < opts.max_rounds && since_best < opts.stall_rounds {
+        rounds += 1;
+        let e = lbfgs(&p, x, eps, opts.iterations);
+        (min_det, inverted) = p.min_det(x);
+        if inverted < best.0 {
+            best = (inverted, x.to_vec());
+            since_best = 0;
+        } else {
+            since_best += 1;
+        }
+        if inverted == 0 {
+            break;
+        }
+        // ε update of Garanzha et al.: shrink by the relative energy decrease, but keep χ of
+        // the worst triangle bounded away from zero.
+        let sigma = (1.0 - e / e_prev).max(0.1);
+        let mu = (1.0 - sigma) * chi(min_det, eps);
+        eps = if min_det < mu {
+            2.0 * (mu * (mu - min_det)).sqrt()
+        } else {
+            1e-10
+        };
+        e_prev = p.eval(x, eps, None);
+    }
+    if best.0 < inverted {
+        x.copy_from_slice(&best.1);
+    }
+    Untangle2dResult {
+        inverted: best.0,
+        rounds,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A square fan (4 fixed corners + 1 free centre, 4 triangles) with the centre placed
+    /// outside: two triangles are inverted; the untangler must bring the centre back inside.
+    #[test]
+    fn untangles_fan_with_outside_centre() {
+        let mut x = vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [1.7, 0.4]];
+        let faces = [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]];
+        let refs: Vec<Reference> = faces
+            .iter()
+            .map(|f| {
+                let p = |i: usize| match i {
+                    4 => [0.5, 0.5, 0.0],
+                    _ => [x[i][0], x[i][1], 0.0],
+                };
+                Reference::from_triangle(p(f[0]), p(f[1]), p(f[2]), 1.0).unwrap()
+            })
+            .collect();
+        let free = [false, false, false, false, true];
+        let before = Problem {
+            faces: &faces,
+            refs: &refs,
+            free: &free,
+            theta: 1.0 / 128.0,
+        }
+        .min_det(&x)
+        .1;
+        assert!(before > 0);
+        let r = untangle_2d(&faces, &refs, &free, &mut x, &Untangle2dOptions::default());
+        assert_eq!(r.inverted, 0);
+        assert!(x[4][0] > 0.0 && x[4][0] < 1.0 && x[4][1] > 0.0 && x[4][1] < 1.0);
+        assert_eq!(x[1], [1.0, 0.0]);
+    }
+
+    /// The analytic gradient matches central differences.
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let x = vec![[0.0, 0.0], [1.0, 0.1], [0.9, 1.2], [0.2, 0.8], [1.3, 0.3]];
+        let faces = [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]];
+        let refs: Vec<Reference> = (0..4)
+            .map(|_| {
+                Reference::from_triangle([0.0; 3], [1.0, 0.0, 0.0], [0.3, 0.9, 0.0], 1.0).unwrap()
+            })
+            .collect();
+        let free = [true; 5];
+        let p = Problem {
+            faces: &faces,
+            refs: &refs,
+            free: &free,
+            theta: 0.2,
+        };
+        let mut g = vec![[0.0; 2]; 5];
+        p.eval(&x, 0.3, Some(&mut g));
+        let h = 1e-6;
+        for v in 0..5 {
+            for k in 0..2 {
+                let mut xp = x.clone();
+                let mut xm = x.clone();
+                xp[v][k] += h;
+                xm[v][k] -= h;
+                let fd = (p.eval(&xp, 0.3, None) - p.eval(&xm, 0.3, None)) / (2.0 * h);
+                assert!((fd - g[v][k]).abs() < 1e-5 * (1.0 + fd.abs()), "{v} {k}");
+            }
+        }
+    }
+}
