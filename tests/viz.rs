@@ -210,7 +210,7 @@ fn grid_pictures() {
 
 #[test]
 fn camel_pictures() {
-    check_pictures("camel_open", &["--max-iters", "400"], 1024);
+    check_pictures("camel_open", &["--max-iters", "400", "--keep-best"], 1024);
 }
 
 #[test]
