@@ -400,13 +400,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     report.interior_edges = topo.interior_edges.len();
     report.boundary_loops = topo.boundary_loops.len();
     report.unreferenced_vertices = vreport.unreferenced_vertices.len();
-    report.flips = m.flips;
-    report.delta_con_mean = m.delta_con_mean;
-    report.delta_con_area_mean = m.delta_con_area_mean;
-    report.delta_con_max = m.delta_con_max;
-    report.mips_energy = m.mips_energy;
-    report.sd_energy = m.sd_energy;
-    report.boundary_self_intersections = m.boundary_self_intersections;
+    report.set_metrics(&m);
     report.seconds_load = t_load;
     report.seconds_init = map.seconds_init;
     report.seconds_solve = map.seconds_solve;
@@ -561,13 +555,7 @@ fn run_atlas(
     report.interior_edges = topo.interior_edges.len() - cutm.seam_edges.len();
     report.boundary_loops = topo.boundary_loops.len();
     report.unreferenced_vertices = vreport.unreferenced_vertices.len();
-    report.flips = m.flips;
-    report.delta_con_mean = m.delta_con_mean;
-    report.delta_con_area_mean = m.delta_con_area_mean;
-    report.delta_con_max = m.delta_con_max;
-    report.mips_energy = m.mips_energy;
-    report.sd_energy = m.sd_energy;
-    report.boundary_self_intersections = m.boundary_self_intersections;
+    report.set_metrics(&m);
     report.atlas = Some(crate::report::AtlasReport {
         charts: cutm.charts.len(),
         chart_faces: cutm.charts.iter().map(Vec::len).collect(),
@@ -614,11 +602,7 @@ fn most_shrunk_vertex(
         let area_uv: Vec<f64> = sub
             .faces
             .iter()
-            .map(|f| {
-                crate::init::signed_area2(uv[f[0] as usize], uv[f[1] as usize], uv[f[2] as usize])
-                    .abs()
-                    / 2.0
-            })
+            .map(|f| crate::init::face_area_2d(&uv, f))
             .collect();
         let (t3, tuv): (f64, f64) = (frames.area.iter().sum(), area_uv.iter().sum());
         if !(t3 > 0.0 && tuv > 0.0) {

@@ -53,6 +53,19 @@ pub struct ParamReport {
     pub global: Option<crate::param::global::GlobalResult>,
 }
 
+impl ParamReport {
+    /// Copies the map's measures (flips, distortions, energies, overlaps).
+    pub fn set_metrics(&mut self, m: &crate::metrics::Metrics) {
+        self.flips = m.flips;
+        self.delta_con_mean = m.delta_con_mean;
+        self.delta_con_area_mean = m.delta_con_area_mean;
+        self.delta_con_max = m.delta_con_max;
+        self.mips_energy = m.mips_energy;
+        self.sd_energy = m.sd_energy;
+        self.boundary_self_intersections = m.boundary_self_intersections;
+    }
+}
+
 /// What cutting and packing did (`foldfree param` on a mesh that is not a disk).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct AtlasReport {

@@ -41,6 +41,11 @@ pub fn default_solve_options() -> CgOptions {
     }
 }
 
+/// Unsigned area of face `f` in the plane `uv`.
+pub fn face_area_2d(uv: &[[f64; 2]], f: &[u32; 3]) -> f64 {
+    signed_area2(uv[f[0] as usize], uv[f[1] as usize], uv[f[2] as usize]).abs() / 2.0
+}
+
 /// Twice the signed area of the UV triangle (a, b, c): (b − a) × (c − a).
 #[inline]
 pub fn signed_area2(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {

@@ -49,11 +49,7 @@ pub fn pack(uv: &mut [[f64; 2]], charts: &[ChartRef], opts: &PackOptions) -> Pac
         let a_uv: f64 = c
             .faces
             .iter()
-            .map(|f| {
-                crate::init::signed_area2(uv[f[0] as usize], uv[f[1] as usize], uv[f[2] as usize])
-                    .abs()
-                    / 2.0
-            })
+            .map(|f| crate::init::face_area_2d(uv, f))
             .sum();
         let s = if a_uv > 0.0 && c.area_3d > 0.0 {
             (c.area_3d / a_uv).sqrt()
