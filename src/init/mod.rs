@@ -193,8 +193,8 @@ pub(crate) fn unreached(n: usize, edges: &[[u32; 2]], used: &[bool], sources: &[
     (0..n).filter(|&v| used[v] && !seen[v]).count()
 }
 
-/// 3D helpers shared by the starting maps.
-pub(crate) mod vec3 {
+/// 3D vector helpers shared by the crate (starting maps, cutting, tet maps).
+pub mod vec3 {
     #[inline]
     pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
         [a[0] - b[0], a[1] - b[1], a[2] - b[2]]

@@ -32,6 +32,7 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::path::Path;
 
+use crate::init::vec3;
 use crate::mesh::{MeshError, Topology, TriMesh, NO_FACE};
 
 /// How seams are chosen.
@@ -210,9 +211,10 @@ fn traverses(f: [u32; 3], a: u32, b: u32) -> bool {
 }
 
 fn edge_length(mesh: &TriMesh, e: [u32; 2]) -> f64 {
-    let p = mesh.positions[e[0] as usize];
-    let q = mesh.positions[e[1] as usize];
-    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+    vec3::norm(vec3::sub(
+        mesh.positions[e[0] as usize],
+        mesh.positions[e[1] as usize],
+    ))
 }
 
 /// |angle defect| per vertex (2π − Σθ inside, π − Σθ on the boundary).
@@ -224,16 +226,8 @@ fn angle_defects(mesh: &TriMesh, topo: &Topology) -> Vec<f64> {
             let a = p[k];
             let b = p[(k + 1) % 3];
             let c = p[(k + 2) % 3];
-            let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let dot = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
-            let cr = [
-                u[1] * w[2] - u[2] * w[1],
-                u[2] * w[0] - u[0] * w[2],
-                u[0] * w[1] - u[1] * w[0],
-            ];
-            let crn = (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt();
-            sum[f[k] as usize] += crn.atan2(dot);
+            let (u, w) = (vec3::sub(b, a), vec3::sub(c, a));
+            sum[f[k] as usize] += vec3::norm(vec3::cross(u, w)).atan2(vec3::dot(u, w));
         }
     }
     let mut on_boundary = vec![false; mesh.positions.len()];

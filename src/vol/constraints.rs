@@ -80,14 +80,7 @@ pub fn constraints_text(c: &[(u32, [f64; 3])], header: &str) -> String {
 /// A real deformation target for meshes with no natural one (the rocker arm).
 pub fn twist_constraints(mesh: &TetMesh, degrees: f64, fraction: f64) -> Vec<(u32, [f64; 3])> {
     let p = &mesh.positions;
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for q in p {
-        for k in 0..3 {
-            lo[k] = lo[k].min(q[k]);
-            hi[k] = hi[k].max(q[k]);
-        }
-    }
+    let (lo, hi) = super::tet::bbox(p);
     let axis = (0..3)
         .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
         .unwrap_or(0);

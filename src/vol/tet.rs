@@ -16,24 +16,7 @@ pub struct TetMesh {
     pub tet_refs: Vec<i64>,
 }
 
-#[inline]
-pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-#[inline]
-pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-#[inline]
-pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
+pub use crate::init::vec3::{cross, dot, sub};
 
 /// `x > 0`, false for NaN: the one orientation test (a NaN volume counts as inverted).
 #[inline]
@@ -147,6 +130,13 @@ pub fn bbox_diagonal(p: &[[f64; 3]]) -> f64 {
     if p.is_empty() {
         return 0.0;
     }
+    let (lo, hi) = bbox(p);
+    let d = sub(hi, lo);
+    dot(d, d).sqrt()
+}
+
+/// Lower and upper corners of the bounding box of a point set (±∞ for an empty set).
+pub fn bbox(p: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for q in p {
@@ -155,8 +145,7 @@ pub fn bbox_diagonal(p: &[[f64; 3]]) -> f64 {
             hi[k] = hi[k].max(q[k]);
         }
     }
-    let d = sub(hi, lo);
-    dot(d, d).sqrt()
+    (lo, hi)
 }
 
 /// Checks that `tets` index inside `nv` vertices (for meshes built in code, not read).
