@@ -88,6 +88,10 @@ struct VolmapArgs {
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Write the constraints the map meets (`vertex x y z`), e.g. the sphere positions the
+    /// ball target's boundary slid to, for `volcheck --constraints`.
+    #[arg(long, value_name = "FILE")]
+    write_constraints: Option<PathBuf>,
     /// Newton iteration cap per phase.
     #[arg(long)]
     max_iters: Option<usize>,
@@ -107,7 +111,8 @@ struct VolmapArgs {
     #[arg(long, value_parser = ["jacobi", "ic0", "amg"])]
     precond: Option<String>,
     /// Skip the default first stage (untangling the init with the constraints held exactly,
-    /// Garanzha et al. 2021) and run the paper's guided deformation + penalty rounds only.
+    /// Garanzha et al. 2021; for `--target ball` also the untangling with the boundary
+    /// sliding on the sphere) and run the paper's guided deformation + penalty rounds only.
     #[arg(long)]
     no_untangle: bool,
     /// No progress display.
@@ -143,6 +148,10 @@ struct VolcheckArgs {
     /// Measure ρ against this constraints file.
     #[arg(long, conflicts_with = "init")]
     constraints: Option<PathBuf>,
+    /// Also report how far the boundary vertices are from the unit sphere (`--target ball`
+    /// maps; exit 1 above 1e-9).
+    #[arg(long)]
+    sphere: bool,
 }
 
 fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
@@ -197,6 +206,7 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         constraints,
         output: a.output,
         report: a.report,
+        write_constraints: a.write_constraints,
         quiet: a.quiet,
         options,
     };
@@ -217,6 +227,12 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
     );
     if q.rho >= 1e-6 {
         eprintln!("  warning: position constraints NOT met (ρ ≥ θ = 1e-6); the map is fold-free");
+    }
+    if let Some(s) = &r.sphere_sliding {
+        eprintln!(
+            "  {:<20} {:>4} it {:>6} ε   {:>7.2} s  inverted {} → {} (boundary sliding on the sphere)",
+            "ball untangle", s.iterations, s.eps_updates, s.seconds, s.inverted_start, s.inverted_left
+        );
     }
     for p in &r.run.phases {
         eprintln!(
@@ -269,10 +285,28 @@ fn run_volcheck(a: VolcheckArgs) -> foldfree::Result<()> {
         (None, None) => Vec::new(),
     };
     let q = foldfree::vol::evaluate(&rest, &x, &targets);
-    println!("{}", serde_json::to_string_pretty(&q).unwrap_or_default());
+    let mut json = serde_json::to_value(q).unwrap_or_default();
+    let sphere = a
+        .sphere
+        .then(|| foldfree::vol::ball::sphere_deviation(&rest, &x));
+    if let (Some(d), Some(o)) = (sphere, json.as_object_mut()) {
+        o.insert("sphere_max_deviation".into(), d.into());
+    }
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&json).unwrap_or_default()
+    );
     if q.inverted > 0 {
         return Err(foldfree::Error::Vol(foldfree::vol::VolError::BadResult(
             format!("{}: {} inverted tet(s)", a.map.display(), q.inverted),
+        )));
+    }
+    if let Some(d) = sphere.filter(|d| d.is_nan() || *d > 1e-9) {
+        return Err(foldfree::Error::Vol(foldfree::vol::VolError::BadResult(
+            format!(
+                "{}: a boundary vertex is {d:.3e} off the unit sphere",
+                a.map.display()
+            ),
         )));
     }
     Ok(())

@@ -410,3 +410,74 @@ fn untangle_gives_up_at_once_on_inverted_pinned_tet() {
     assert_eq!(s.inverted, m.inverted(&x).len());
     assert_eq!(s.iterations, 0);
 }
+
+/// The ball target's boundary slides on the sphere: a start whose spherical embedding inverts
+/// tets with all four corners on the boundary (no interior vertex can help) is untangled by
+/// moving those corners along the sphere.
+#[test]
+fn ball_boundary_slides_to_untangle_all_boundary_tets() {
+    use foldfree::vol::ball::{slide_on_sphere, sphere_deviation};
+    let m = read_any(&data("cube_5tets.mesh")).unwrap();
+    // The inscribed cube (a fold-free map onto the sphere), then corners 0 and 7 swapped:
+    // every tet through either of them flips or degenerates.
+    let s = 1.0 / 3f64.sqrt();
+    let mut sphere: Vec<[f64; 3]> = m
+        .positions
+        .iter()
+        .map(|p| p.map(|c| (2.0 * c - 1.0) * s))
+        .collect();
+    sphere.swap(0, 7);
+    let targets: Vec<(u32, [f64; 3])> = (0..8).map(|v| (v, sphere[v as usize])).collect();
+    assert!(!m.inverted(&sphere).is_empty(), "the test start must fold");
+    let (x, slid, r) = slide_on_sphere(&m, &sphere, &targets, &UntangleOptions::default()).unwrap();
+    assert!(r.inverted_start > 0);
+    assert_eq!(r.inverted_left, 0);
+    assert!(m.inverted(&x).is_empty());
+    assert!(sphere_deviation(&m, &x) < 1e-12);
+    // The constraints returned are where the boundary ended, so the map meets them exactly.
+    assert_eq!(evaluate(&m, &x, &slid).rho, 0.0);
+}
+
+#[test]
+fn cli_ball_target_writes_constraints_volcheck_confirms() {
+    let dir = TempDir::new("vol_ball");
+    let m = star_tet();
+    let rest = dir.join("rest.mesh");
+    write_any(&rest, &m, &m.positions).unwrap();
+    let out = dir.join("out.mesh");
+    let cons = dir.join("c.txt");
+    let st = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("volmap")
+        .arg(&rest)
+        .args(["--target", "ball", "-q", "-o"])
+        .arg(&out)
+        .arg("--write-constraints")
+        .arg(&cons)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let check = |map: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_foldfree"))
+            .arg("volcheck")
+            .arg(map)
+            .arg("--rest")
+            .arg(&rest)
+            .arg("--constraints")
+            .arg(&cons)
+            .arg("--sphere")
+            .output()
+            .unwrap()
+    };
+    let ok = check(&out);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let q: serde_json::Value = serde_json::from_slice(&ok.stdout).unwrap();
+    assert_eq!(q["inverted"], 0);
+    assert!(q["rho"].as_f64().unwrap() < 1e-20);
+    assert!(q["sphere_max_deviation"].as_f64().unwrap() < 1e-12);
+    // The rest shape is not on the sphere: volcheck --sphere refuses it.
+    assert_eq!(check(&rest).status.code(), Some(1));
+}

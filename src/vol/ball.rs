@@ -12,10 +12,12 @@ use std::path::Path;
 
 use super::harmonic::harmonic_extension;
 use super::tet::{cross, dot, is_positive, TetMesh};
+use super::untangle::{untangle_sliding, UntangleOptions};
 use super::Targets;
 use super::VolError;
 use crate::init::{tutte, TutteWeights};
 use crate::mesh::{Topology, TriMesh};
+use serde::Serialize;
 
 /// The sphere positions of the boundary vertices (mesh indices) and the number of boundary
 /// triangles whose chordal triangle is not positive seen from the centre.
@@ -106,4 +108,58 @@ pub fn ball_target(mesh: &TetMesh) -> Result<(Vec<[f64; 3]>, Targets, usize), Vo
     let zero = vec![[0.0; 3]; mesh.positions.len()];
     let init = harmonic_extension(mesh, &zero, &targets)?;
     Ok((init, targets, nbad))
+}
+
+/// What the sliding untangler of the ball target did.
+#[derive(Clone, Debug, Serialize)]
+pub struct SlideReport {
+    /// Inverted tets of the start (harmonic interior, boundary on the fixed embedding).
+    pub inverted_start: usize,
+    pub inverted_left: usize,
+    pub iterations: usize,
+    pub eps_updates: usize,
+    pub seconds: f64,
+}
+
+/// Largest |‖x‖ − 1| over the boundary vertices of `x`: 0 up to rounding when the boundary
+/// lies on the unit sphere (the independent check of a ball map).
+pub fn sphere_deviation(mesh: &TetMesh, x: &[[f64; 3]]) -> f64 {
+    mesh.boundary_vertices()
+        .iter()
+        .map(|&v| (dot(x[v as usize], x[v as usize]).sqrt() - 1.0).abs())
+        .fold(0.0, f64::max)
+}
+
+/// Untangles a start map of the ball target with the boundary vertices sliding on the unit
+/// sphere (interior free), from `start` with its boundary put on the sphere targets first.
+/// Returns the map and its boundary positions — the constraints of the rest of the pipeline,
+/// which it meets exactly — when no tet is left inverted.
+///
+/// Why: a fixed spherical embedding can invert tets whose four corners are all boundary
+/// vertices (47 on the hand: tets spanning a thin finger), and then no map with that boundary
+/// exists. The sphere is the target, not one parametrisation of it, so the boundary slides.
+pub fn slide_on_sphere(
+    mesh: &TetMesh,
+    start: &[[f64; 3]],
+    targets: &Targets,
+    opts: &UntangleOptions,
+) -> Result<(Vec<[f64; 3]>, Targets, SlideReport), VolError> {
+    let mut x = start.to_vec();
+    let mut on_sphere = vec![false; x.len()];
+    for (v, p) in targets {
+        x[*v as usize] = *p;
+        on_sphere[*v as usize] = true;
+    }
+    let fixed = vec![false; x.len()];
+    let inverted_start = mesh.inverted(&x).len();
+    let s = untangle_sliding(mesh, &mut x, &fixed, &on_sphere, opts)?;
+    let slid = targets.iter().map(|(v, _)| (*v, x[*v as usize])).collect();
+    let report = SlideReport {
+        inverted_start,
+        inverted_left: s.inverted,
+        iterations: s.iterations,
+        eps_updates: s.outer,
+        seconds: s.seconds,
+    };
+    Ok((x, slid, report))
 }

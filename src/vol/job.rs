@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use super::ball::ball_target;
-use super::constraints::read_constraints;
+use super::ball::{ball_target, slide_on_sphere, SlideReport};
+use super::constraints::{constraints_text, read_constraints};
 use super::harmonic::harmonic_extension;
 use super::tetgen::{read_any, write_any};
 use super::volmap::{evaluate, volmap, MapQuality, VolmapOptions, VolmapReport};
@@ -32,6 +32,8 @@ pub struct VolmapJob {
     pub constraints: ConstraintSource,
     pub output: PathBuf,
     pub report: Option<PathBuf>,
+    /// Where to write the constraints the map meets (`vertex x y z`).
+    pub write_constraints: Option<PathBuf>,
     pub quiet: bool,
     pub options: VolmapOptions,
 }
@@ -46,6 +48,10 @@ pub struct VolmapFileReport {
     /// Ball target: boundary triangles not positive seen from the centre (0 = star-shaped).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sphere_nonpositive_faces: Option<usize>,
+    /// Ball target: the untangling with the boundary sliding on the sphere, whose end
+    /// positions became the constraints (when it left no tet inverted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sphere_sliding: Option<SlideReport>,
     #[serde(flatten)]
     pub run: VolmapReport,
     /// Re-measured from the written file.
@@ -109,11 +115,25 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         None => None,
     };
     let mut sphere_bad = None;
+    let mut sliding = None;
     let (init, targets) = match &job.constraints {
         ConstraintSource::Ball => {
             let (start, t, bad) = ball_target(&rest)?;
             sphere_bad = Some(bad);
-            (init_pos.unwrap_or(start), t)
+            let start = init_pos.unwrap_or(start);
+            match &job.options.untangle {
+                Some(u) => {
+                    let (x, slid, s) = slide_on_sphere(&rest, &start, &t, u)?;
+                    let ok = s.inverted_left == 0;
+                    sliding = Some(s);
+                    if ok {
+                        (x, slid)
+                    } else {
+                        (start, t)
+                    }
+                }
+                None => (start, t),
+            }
         }
         src => {
             let t = constraints_for(&rest, init_pos.as_deref(), src)?;
@@ -166,9 +186,23 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
             ConstraintSource::Ball => "ball".into(),
         },
         sphere_nonpositive_faces: sphere_bad,
+        sphere_sliding: sliding,
         run,
         written,
     };
+    if let Some(p) = &job.write_constraints {
+        let header = format!(
+            "constraints met by {} (foldfree volmap {})\nvertex_index x y z (0-based)",
+            job.output.display(),
+            job.rest.display()
+        );
+        crate::mesh::write_atomic(p, constraints_text(&targets, &header).as_bytes()).map_err(
+            |source| VolError::Io {
+                path: p.clone(),
+                source,
+            },
+        )?;
+    }
     if let Some(p) = &job.report {
         let text = serde_json::to_string_pretty(&report)
             .map_err(|e| VolError::BadResult(format!("report serialisation: {e}")))?;

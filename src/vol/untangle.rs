@@ -186,16 +186,70 @@ pub fn untangle(
     fixed: &[bool],
     opts: &UntangleOptions,
 ) -> Result<UntangleStats, VolError> {
+    untangle_sliding(rest, x, fixed, &[], opts)
+}
+
+/// [`untangle`] where the vertices with `on_sphere[v]` (an empty slice: none) slide on the
+/// unit sphere instead of being fixed: they start on it and every step keeps them there
+/// (tangent gradient, then a step followed by normalisation — a retraction, so the Armijo test
+/// still sees a descent direction to first order).
+///
+/// Why: with the boundary pinned to one spherical embedding, tets whose four corners are all
+/// on the boundary keep whatever sign that embedding gave them; on a hand (thin fingers,
+/// tets spanning a finger with only boundary corners) some are inverted by the embedding
+/// itself and no interior placement can repair them. Letting the boundary slide on the
+/// sphere makes the sphere, not one embedding of it, the constraint.
+pub fn untangle_sliding(
+    rest: &TetMesh,
+    x: &mut [[f64; 3]],
+    fixed: &[bool],
+    on_sphere: &[bool],
+    opts: &UntangleOptions,
+) -> Result<UntangleStats, VolError> {
     let start = Instant::now();
     let nv = x.len();
-    if nv != rest.positions.len() || fixed.len() != nv {
+    if nv != rest.positions.len()
+        || fixed.len() != nv
+        || !(on_sphere.is_empty() || on_sphere.len() == nv)
+    {
         return Err(VolError::Input(format!(
-            "untangle: {} positions, {} fixed flags for a mesh of {} vertices",
+            "untangle: {} positions, {} fixed and {} sphere flags for a mesh of {} vertices",
             nv,
             fixed.len(),
+            on_sphere.len(),
             rest.positions.len()
         )));
     }
+    let sliding: Vec<usize> = (0..on_sphere.len())
+        .filter(|&v| on_sphere[v] && !fixed[v])
+        .collect();
+    for &v in &sliding {
+        let r = super::tet::dot(x[v], x[v]).sqrt();
+        if !(r > 0.0 && r.is_finite()) {
+            return Err(VolError::Input(format!(
+                "untangle: sliding vertex {v} is at the centre of the sphere"
+            )));
+        }
+        x[v] = x[v].map(|c| c / r);
+    }
+    // Tangent part of the gradient at the sliding vertices (x on the unit sphere).
+    let project = |x: &[[f64; 3]], g: &mut [f64]| {
+        for &v in &sliding {
+            let gv = [g[3 * v], g[3 * v + 1], g[3 * v + 2]];
+            let k = super::tet::dot(gv, x[v]);
+            for r in 0..3 {
+                g[3 * v + r] -= k * x[v][r];
+            }
+        }
+    };
+    let retract = |p: &mut [[f64; 3]]| {
+        for &v in &sliding {
+            let r = super::tet::dot(p[v], p[v]).sqrt();
+            if r > 0.0 {
+                p[v] = p[v].map(|c| c / r);
+            }
+        }
+    };
     let mut d = Vec::with_capacity(rest.tets.len());
     let mut vol = Vec::with_capacity(rest.tets.len());
     for (i, t) in rest.tets.iter().enumerate() {
@@ -276,6 +330,7 @@ pub fn untangle(
         stats.outer = outer + 1;
         let e_prev = prob.value(x, eps);
         let mut e = prob.value_grad(x, eps, &mut g);
+        project(x, &mut g);
         let mut s_hist: Vec<Vec<f64>> = Vec::new();
         let mut y_hist: Vec<Vec<f64>> = Vec::new();
         for _ in 0..opts.max_inner {
@@ -333,7 +388,9 @@ pub fn untangle(
                         trial[v][r] = x[v][r] + t * dir[3 * v + r];
                     }
                 }
+                retract(&mut trial);
                 let et = prob.value_grad(&trial, eps, &mut g_new);
+                project(&trial, &mut g_new);
                 if et.is_finite() && et <= e + 1e-4 * t * slope {
                     accepted = Some(et);
                     break;
@@ -344,7 +401,10 @@ pub fn untangle(
             let Some(et) = accepted else {
                 break;
             };
-            let s: Vec<f64> = dir.iter().map(|q| t * q).collect();
+            // The step actually taken (the retraction shortens it on the sphere).
+            let s: Vec<f64> = (0..n)
+                .map(|i| trial[i / 3][i % 3] - x[i / 3][i % 3])
+                .collect();
             let y: Vec<f64> = g_new.iter().zip(&g).map(|(a, b)| a - b).collect();
             x.copy_from_slice(&trial);
             std::mem::swap(&mut g, &mut g_new);
