@@ -88,6 +88,11 @@ struct VolmapArgs {
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// `--target ball`: cap on the Newton steps that lower the distortion while the boundary
+    /// still slides on the sphere (0: none; the boundary is then fixed where the untangler
+    /// left it).
+    #[arg(long, value_name = "N", default_value_t = 150)]
+    ball_relax_iters: usize,
     /// Write the constraints the map meets (`vertex x y z`), e.g. the sphere positions the
     /// ball target's boundary slid to, for `volcheck --constraints`.
     #[arg(long, value_name = "FILE")]
@@ -200,6 +205,10 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
     if a.no_untangle {
         options.untangle = None;
     }
+    options.ball_relax = match (a.ball_relax_iters, options.ball_relax) {
+        (0, _) | (_, None) => None,
+        (n, Some(r)) => Some(foldfree::vol::newton::NewtonOptions { max_iters: n, ..r }),
+    };
     let job = VolmapJob {
         rest: a.rest,
         init: a.init,
@@ -233,6 +242,12 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
             "  {:<20} {:>4} it {:>6} ε   {:>7.2} s  inverted {} → {} (boundary sliding on the sphere)",
             "ball untangle", s.iterations, s.eps_updates, s.seconds, s.inverted_start, s.inverted_left
         );
+        if let Some(d) = s.delta_t_before_relax {
+            eprintln!(
+                "  {:<20} {:>4} it {:>9} {:>7.2} s  δ_t {d:.4} before (boundary sliding on the sphere)",
+                "ball relax", s.relax_iterations, "", s.relax_seconds
+            );
+        }
     }
     for p in &r.run.phases {
         eprintln!(

@@ -163,6 +163,7 @@ fn objective_gradient_and_hessian_match_finite_differences() {
         targets: vec![],
         lambda: 0.0,
         fixed: vec![false; 5],
+        on_sphere: vec![],
     };
     let x: Vec<[f64; 3]> = m
         .positions
@@ -429,7 +430,8 @@ fn ball_boundary_slides_to_untangle_all_boundary_tets() {
     sphere.swap(0, 7);
     let targets: Vec<(u32, [f64; 3])> = (0..8).map(|v| (v, sphere[v as usize])).collect();
     assert!(!m.inverted(&sphere).is_empty(), "the test start must fold");
-    let (x, slid, r) = slide_on_sphere(&m, &sphere, &targets, &UntangleOptions::default()).unwrap();
+    let (x, slid, r) =
+        slide_on_sphere(&m, &sphere, &targets, &UntangleOptions::default(), None).unwrap();
     assert!(r.inverted_start > 0);
     assert_eq!(r.inverted_left, 0);
     assert!(m.inverted(&x).is_empty());

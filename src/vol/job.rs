@@ -123,7 +123,8 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
             let start = init_pos.unwrap_or(start);
             match &job.options.untangle {
                 Some(u) => {
-                    let (x, slid, s) = slide_on_sphere(&rest, &start, &t, u)?;
+                    let (x, slid, s) =
+                        slide_on_sphere(&rest, &start, &t, u, job.options.ball_relax.as_ref())?;
                     let ok = s.inverted_left == 0;
                     sliding = Some(s);
                     if ok {

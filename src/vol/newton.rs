@@ -66,6 +66,10 @@ pub struct Objective {
     pub lambda: f64,
     /// Vertices that do not move.
     pub fixed: Vec<bool>,
+    /// Vertices that stay on the unit sphere (empty: none): their Newton steps are tangent to
+    /// it and every trial point is renormalised onto it (the ball target's boundary, which
+    /// must lie on the sphere but may slide along it).
+    pub on_sphere: Vec<bool>,
 }
 
 pub type Local = (f64, [f64; 12], [[f64; 12]; 12]);
@@ -316,13 +320,22 @@ pub fn newton(
         ..Default::default()
     };
     let fixed = |v: u32| obj.fixed.get(v as usize).copied().unwrap_or(false);
+    let sliding = |v: u32| obj.on_sphere.get(v as usize).copied().unwrap_or(false) && !fixed(v);
+    let slide: Vec<u32> = (0..nv as u32).filter(|&v| sliding(v)).collect();
     let mut data = vec![0.0; pattern.indices.len()];
     let mut grad = vec![0.0; n];
     let mut step = vec![0.0; n];
     for it in 0..opts.max_iters {
         let locals: Vec<Option<Local>> = (0..obj.tets.len())
             .into_par_iter()
-            .map(|t| obj.tet_local(t, x))
+            .map(|t| {
+                let mut l = obj.tet_local(t, x)?;
+                let tet = &obj.tets[t];
+                if tet.iter().any(|&v| sliding(v)) {
+                    project_tangent(tet, x, &sliding, &mut l);
+                }
+                Some(l)
+            })
             .collect();
         data.iter_mut().for_each(|v| *v = 0.0);
         grad.iter_mut().for_each(|v| *v = 0.0);
@@ -387,6 +400,17 @@ pub fn newton(
                 }
             }
         }
+        // A sliding vertex's block is P·H·P (P = I − nnᵀ), singular along n: add mean_diag·nnᵀ,
+        // so the normal component of its step solves mean_diag·(n·d) = n·(−Pg) = 0.
+        for &v in &slide {
+            let k = self_slot(pattern, v);
+            let nrm = x[v as usize];
+            for r in 0..3 {
+                for c in 0..3 {
+                    data[pattern.pos(v, r, k, c)] += mean_diag * nrm[r] * nrm[c];
+                }
+            }
+        }
         let gnorm = grad.iter().map(|g| g * g).sum::<f64>().sqrt();
         if gnorm == 0.0 || !gnorm.is_finite() {
             stats.converged = gnorm == 0.0;
@@ -432,6 +456,15 @@ pub fn newton(
                 let d = p3[v];
                 *q = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
             }
+            // Back onto the sphere (a retraction: second-order close to the tangent step, and
+            // the energy test below sees any tet the renormalisation inverts as +∞).
+            for &v in &slide {
+                let q = &mut trial[v as usize];
+                let r = super::tet::dot(*q, *q).sqrt();
+                if r > 0.0 {
+                    *q = q.map(|c| c / r);
+                }
+            }
             let e = obj.value(&trial);
             if e.is_finite() && e <= energy + 1e-4 * t * slope {
                 accepted = Some(e);
@@ -463,6 +496,46 @@ pub fn newton(
     }
     stats.energy = energy;
     Ok(stats)
+}
+
+/// Restricts a tet's gradient and Hessian to the tangent planes of its sliding corners:
+/// g_i ← P_i g_i, H_ij ← P_i H_ij P_j with P = I − nnᵀ, n = the corner's (unit) position.
+/// The projected Hessian stays positive semi-definite (a congruence of a PSD matrix).
+fn project_tangent(tet: &[u32; 4], x: &[[f64; 3]], sliding: &dyn Fn(u32) -> bool, l: &mut Local) {
+    let (_, g, h) = l;
+    let mut p = [[[0.0; 3]; 3]; 4];
+    for (i, &v) in tet.iter().enumerate() {
+        let nrm = x[v as usize];
+        for r in 0..3 {
+            for c in 0..3 {
+                let id = if r == c { 1.0 } else { 0.0 };
+                p[i][r][c] = if sliding(v) { id - nrm[r] * nrm[c] } else { id };
+            }
+        }
+    }
+    for i in 0..4 {
+        let gi = [g[3 * i], g[3 * i + 1], g[3 * i + 2]];
+        for r in 0..3 {
+            g[3 * i + r] = (0..3).map(|c| p[i][r][c] * gi[c]).sum();
+        }
+    }
+    let old = *h;
+    for i in 0..4 {
+        for j in 0..4 {
+            // (P_i H_ij P_j)[r][s] = Σ_a Σ_b P_i[r][a] H_ij[a][b] P_j[b][s].
+            for r in 0..3 {
+                for s_ in 0..3 {
+                    let mut v = 0.0;
+                    for a in 0..3 {
+                        for b in 0..3 {
+                            v += p[i][r][a] * old[3 * i + a][3 * j + b] * p[j][b][s_];
+                        }
+                    }
+                    h[3 * i + r][3 * j + s_] = v;
+                }
+            }
+        }
+    }
 }
 
 fn self_slot(pattern: &Pattern, v: u32) -> u32 {

@@ -319,6 +319,17 @@ pub fn untangle_sliding(
     let n = 3 * nv;
     let min_det = |x: &[[f64; 3]]| prob.dets(x).into_iter().fold(f64::INFINITY, f64::min);
     let mut detmin = min_det(x);
+    if detmin > 0.0 {
+        // Nothing to untangle; minimising f_ε anyway would only trade the start's distortion
+        // for this energy's (the post-optimisation minimises the measured one).
+        return Ok(UntangleStats {
+            min_det: detmin,
+            energy: prob.value(x, 1e-10),
+            eps: 1e-10,
+            seconds: start.elapsed().as_secs_f64(),
+            ..Default::default()
+        });
+    }
     // The paper's first ε: small when nothing is inverted, else of the order of the worst det.
     let mut eps = (1e-12 + 0.04 * detmin.min(0.0).powi(2)).sqrt();
     let mut stats = UntangleStats::default();

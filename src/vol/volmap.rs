@@ -46,6 +46,11 @@ pub struct VolmapOptions {
     /// On by default: on the armadillo it meets ρ = 0 and δ_t 10.92 in ~15 s where the
     /// penalty phases stall at ρ 1.2e-3 (BENCHMARKS.md); None runs the paper's pipeline only.
     pub untangle: Option<UntangleOptions>,
+    /// `--target ball`: Newton on the distortion with the boundary sliding on the sphere,
+    /// after the sliding untangler (None: skipped). Capped because the path is long — the
+    /// fingers of a hand spread over the sphere at steps the flip-free bound keeps small
+    /// (hand: δ_t 48.7 → 32.7 in 150 steps, → 24.7 in 500; BENCHMARKS.md).
+    pub ball_relax: Option<NewtonOptions>,
 }
 
 impl Default for VolmapOptions {
@@ -65,6 +70,10 @@ impl Default for VolmapOptions {
                 ..NewtonOptions::default()
             }),
             untangle: Some(UntangleOptions::default()),
+            ball_relax: Some(NewtonOptions {
+                max_iters: 150,
+                ..NewtonOptions::default()
+            }),
         }
     }
 }
@@ -156,6 +165,30 @@ fn rest_data(mesh: &TetMesh) -> Result<Rest, VolError> {
     Ok(Rest {
         dm_inv,
         weight: vol.iter().map(|v| v / total).collect(),
+    })
+}
+
+/// The post-optimisation objective: volume-weighted symmetric Dirichlet distortion of the
+/// rest → x map itself (no guide, no penalty), with `fixed` vertices held and `on_sphere`
+/// ones sliding on the unit sphere.
+pub fn distortion_objective(
+    rest: &TetMesh,
+    fixed: Vec<bool>,
+    on_sphere: Vec<bool>,
+) -> Result<Objective, VolError> {
+    let rd = rest_data(rest)?;
+    let d: Vec<_> = rd.dm_inv.iter().map(corner_weights).collect();
+    Ok(Objective {
+        tets: rest.tets.clone(),
+        weight: rd.weight,
+        d_dist: d.clone(),
+        d_fit: d,
+        guide: vec![IDENTITY; rest.tets.len()],
+        omega: 0.0,
+        targets: Vec::new(),
+        lambda: 0.0,
+        fixed,
+        on_sphere,
     })
 }
 
@@ -269,6 +302,7 @@ pub fn volmap(
         targets: targets.to_vec(),
         lambda: 0.0,
         fixed: vec![false; nv],
+        on_sphere: Vec::new(),
     };
 
     // 2. Deformation from the rest shape.
@@ -381,15 +415,8 @@ pub fn volmap(
             fixed[*v as usize] = true;
         }
         let post_obj = Objective {
-            tets: rest.tets.clone(),
-            weight: rd.weight.clone(),
-            d_dist: d_fit.clone(),
-            d_fit,
-            guide: vec![IDENTITY; rest.tets.len()],
-            omega: 0.0,
             targets: targets.to_vec(),
-            lambda: 0.0,
-            fixed,
+            ..distortion_objective(rest, fixed, Vec::new())?
         };
         run("post-optimisation", &post_obj, &mut x, post, &mut phases)?;
     }
