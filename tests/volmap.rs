@@ -438,6 +438,24 @@ fn ball_boundary_slides_to_untangle_all_boundary_tets() {
     assert!(sphere_deviation(&m, &x) < 1e-12);
     // The constraints returned are where the boundary ended, so the map meets them exactly.
     assert_eq!(evaluate(&m, &x, &slid).rho, 0.0);
+    // With the sliding relaxation: still on the sphere and fold-free, distortion not higher.
+    let relax = foldfree::vol::newton::NewtonOptions::default();
+    let (y, _, r2) = slide_on_sphere(
+        &m,
+        &sphere,
+        &targets,
+        &UntangleOptions::default(),
+        Some(&relax),
+    )
+    .unwrap();
+    assert!(m.inverted(&y).is_empty());
+    assert!(sphere_deviation(&m, &y) < 1e-12);
+    let before = r2.delta_t_before_relax.unwrap();
+    let after = evaluate(&m, &y, &[]).delta_t;
+    assert!(
+        r2.relax_iterations > 0 && after < before,
+        "{before} → {after}"
+    );
 }
 
 #[test]
