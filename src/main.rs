@@ -445,6 +445,10 @@ struct ParamArgs {
     /// At most this many extra seams, each to the tip a conformal map shrinks most.
     #[arg(long, default_value_t = 8)]
     extra_seams: usize,
+    /// At most this many seams splitting charts whose map's boundary overlaps itself
+    /// (the map is then injective per chart; 0 keeps overlapping charts).
+    #[arg(long, default_value_t = 16)]
+    overlap_splits: usize,
     /// Extra seams are cut while some vertex's area shrinks more than this factor.
     #[arg(long, default_value_t = 16.0)]
     stretch_limit: f64,
@@ -922,6 +926,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     }
     job.cut_options.curvature_weight = args.seam_curvature;
     job.cut_options.extra_seams = args.extra_seams;
+    job.cut_options.overlap_splits = args.overlap_splits;
     if !(args.stretch_limit.is_finite() && args.stretch_limit >= 1.0) {
         return Err(foldfree::Error::Usage(format!(
             "--stretch-limit {} must be a finite number >= 1",

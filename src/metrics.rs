@@ -346,6 +346,25 @@ pub fn segments_intersect(p1: [f64; 2], p2: [f64; 2], p3: [f64; 2], p4: [f64; 2]
 /// of the overlap of their boxes, so it is counted once. Expected O(n) for a boundary whose
 /// segments have similar lengths.
 pub fn boundary_self_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>]) -> usize {
+    let mut count = 0;
+    visit_boundary_intersections(uv, loops, &mut |_, _| count += 1);
+    count
+}
+
+/// The intersecting pairs [`boundary_self_intersections`] counts, as (segment, segment) with
+/// segments given by their end vertices in loop order — where to cut a chart whose boundary
+/// overlaps itself.
+pub fn boundary_intersecting_pairs(uv: &[[f64; 2]], loops: &[Vec<u32>]) -> Vec<[[u32; 2]; 2]> {
+    let mut pairs = Vec::new();
+    visit_boundary_intersections(uv, loops, &mut |a, b| pairs.push([a, b]));
+    pairs
+}
+
+fn visit_boundary_intersections(
+    uv: &[[f64; 2]],
+    loops: &[Vec<u32>],
+    visit: &mut dyn FnMut([u32; 2], [u32; 2]),
+) {
     let mut segs: Vec<[u32; 2]> = Vec::new();
     for l in loops {
         if l.len() < 2 {
@@ -360,7 +379,7 @@ pub fn boundary_self_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>]) -> usize
     }
     let n = segs.len();
     if n < 2 {
-        return 0;
+        return;
     }
     let bbox: Vec<[f64; 4]> = segs
         .iter()
@@ -376,13 +395,15 @@ pub fn boundary_self_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>]) -> usize
         .collect();
     if bbox.iter().flatten().any(|x| !x.is_finite()) {
         // Non-finite UVs: no meaningful geometry; fall back to the plain pair test.
-        return count_pairs(
+        visit_pairs(
             uv,
             &segs,
             &bbox,
             (0..n).collect::<Vec<_>>().as_slice(),
             None,
+            visit,
         );
+        return;
     }
     let lo = [
         bbox.iter().map(|b| b[0]).fold(f64::INFINITY, f64::min),
@@ -432,30 +453,29 @@ pub fn boundary_self_intersections(uv: &[[f64; 2]], loops: &[Vec<u32>]) -> usize
             }
         }
     }
-    let mut count = 0;
     for c in 0..g * g {
         let here = &cell_segs[start[c]..start[c + 1]];
-        count += count_pairs(
+        visit_pairs(
             uv,
             &segs,
             &bbox,
             here,
             Some(&|x: f64, y: f64| cell_of(y, 1) * g + cell_of(x, 0) == c),
+            visit,
         );
     }
-    count
 }
 
-/// Intersecting non-adjacent pairs among `ids`; `owner(x, y)` (if given) says whether this
-/// cell owns the pair whose box overlap starts at (x, y).
-fn count_pairs(
+/// Visits the intersecting non-adjacent pairs among `ids`; `owner(x, y)` (if given) says
+/// whether this cell owns the pair whose box overlap starts at (x, y).
+fn visit_pairs(
     uv: &[[f64; 2]],
     segs: &[[u32; 2]],
     bbox: &[[f64; 4]],
     ids: &[usize],
     owner: Option<&dyn Fn(f64, f64) -> bool>,
-) -> usize {
-    let mut count = 0;
+    visit: &mut dyn FnMut([u32; 2], [u32; 2]),
+) {
     for (k, &i) in ids.iter().enumerate() {
         for &j in &ids[k + 1..] {
             let (si, sj) = (segs[i], segs[j]);
@@ -477,9 +497,8 @@ fn count_pairs(
                 uv[sj[0] as usize],
                 uv[sj[1] as usize],
             ) {
-                count += 1;
+                visit(si, sj);
             }
         }
     }
-    count
 }

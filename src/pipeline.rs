@@ -441,7 +441,55 @@ fn run_atlas(
         }
         cutm = cut::cut_to_disks_through(&input, topo, &job.cut_options, &job.input, &extra)?;
     }
-    let seconds_cut = t_cut.elapsed().as_secs_f64();
+    let mut seconds_cut = t_cut.elapsed().as_secs_f64();
+
+    // Map every chart; while some chart's boundary overlaps itself in UV, split it across
+    // the overlap and map the two halves (charts left whole keep their maps).
+    let mut splits: Vec<cut::Split> = Vec::new();
+    let mut cache: std::collections::HashMap<Vec<u32>, MapOutput> = Default::default();
+    let maps = loop {
+        let mut maps = Vec::with_capacity(cutm.charts.len());
+        let mut new_splits = Vec::new();
+        for faces in &cutm.charts {
+            let (sub, global) = cutm.chart_mesh(faces);
+            let sub_topo = Topology::build(&sub, &job.input)?;
+            let map = match cache.remove(faces) {
+                Some(m) => m,
+                None => compute_map(
+                    &sub,
+                    &sub_topo,
+                    job.init,
+                    job.solver,
+                    &job.admm,
+                    ctx,
+                    job.profile,
+                    progress,
+                )?,
+            };
+            if splits.len() + new_splits.len() < job.cut_options.overlap_splits {
+                if let Some(sp) = overlap_split(&map.uv, &sub_topo, &global, &cutm.origin, faces) {
+                    new_splits.push(sp);
+                }
+            }
+            maps.push(map);
+        }
+        if new_splits.is_empty() {
+            break maps;
+        }
+        let t = Instant::now();
+        let before = cutm.charts.len();
+        splits.extend(new_splits);
+        let recut =
+            cut::cut_to_disks_split(&input, topo, &job.cut_options, &job.input, &extra, &splits)?;
+        seconds_cut += t.elapsed().as_secs_f64();
+        if recut.charts.len() == before {
+            break maps; // no split could be cut: keep what we have
+        }
+        for (faces, map) in cutm.charts.iter().zip(maps) {
+            cache.insert(faces.clone(), map);
+        }
+        cutm = recut;
+    };
 
     let mut uv = vec![[0.0f64; 2]; cutm.mesh.positions.len()];
     let mut chart_meshes = Vec::with_capacity(cutm.charts.len());
@@ -456,19 +504,8 @@ fn run_atlas(
     let mut seconds_solve = 0.0;
     let mut converged = true;
     let mut largest = 0usize;
-    for faces in &cutm.charts {
+    for (faces, map) in cutm.charts.iter().zip(maps) {
         let (sub, global) = cutm.chart_mesh(faces);
-        let sub_topo = Topology::build(&sub, &job.input)?;
-        let map = compute_map(
-            &sub,
-            &sub_topo,
-            job.init,
-            job.solver,
-            &job.admm,
-            ctx,
-            job.profile,
-            progress,
-        )?;
         for (l, &g) in global.iter().enumerate() {
             uv[g as usize] = map.uv[l];
         }
@@ -567,6 +604,7 @@ fn run_atlas(
         packing_efficiency: packing.efficiency,
         margin: job.pack.margin,
         extra_seams: extra.len(),
+        overlap_splits: splits.len(),
         seconds_cut,
     });
     report.seconds_load = t_load;
@@ -577,6 +615,37 @@ fn run_atlas(
         mesh: cutm.mesh,
         uv,
         report,
+    })
+}
+
+/// Where to split a chart whose UV boundary crosses itself: at the first crossing pair of
+/// boundary segments, a seam between the midpoints of the two boundary arcs that separate
+/// them, so each half holds one of the two segments. `None` when the boundary is simple.
+fn overlap_split(
+    uv: &[[f64; 2]],
+    topo: &Topology,
+    global: &[u32],
+    origin: &[u32],
+    faces: &[u32],
+) -> Option<crate::param::cut::Split> {
+    let pairs = metrics::boundary_intersecting_pairs(uv, &topo.boundary_loops);
+    let [s1, s2] = *pairs.first()?;
+    let l = topo.boundary_loops.iter().find(|l| l.contains(&s1[0]))?;
+    let n = l.len();
+    let pos = |v: u32| l.iter().position(|&w| w == v);
+    let (mut i, mut j) = (pos(s1[0])?, pos(s2[0])?);
+    if i > j {
+        std::mem::swap(&mut i, &mut j);
+    }
+    let input = |k: usize| origin[global[l[k % n] as usize] as usize];
+    let a = input((i + 1 + j) / 2);
+    let m2 = (j + 1 + i + n) / 2;
+    // Both sides of a seam are on the boundary: step on if the midpoints are one input vertex.
+    let b = (0..n).map(|d| input(m2 + d)).find(|&b| b != a)?;
+    Some(crate::param::cut::Split {
+        a,
+        b,
+        face: *faces.first()?,
     })
 }
 

@@ -87,5 +87,8 @@ pub struct AtlasReport {
     pub margin: f64,
     /// Seams added to relieve stretched tips (`CutOptions::extra_seams`).
     pub extra_seams: usize,
+    /// Charts split because their map's boundary overlapped itself
+    /// (`CutOptions::overlap_splits`).
+    pub overlap_splits: usize,
     pub seconds_cut: f64,
 }

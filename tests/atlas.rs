@@ -113,7 +113,9 @@ fn chart_topology(obj: &objcheck::Obj, faces: &[usize]) -> (i64, usize) {
 }
 
 /// Runs `param` on `input` and checks the written atlas; returns the report.
-fn check_atlas(input: &Path, dir: &TempDir, extra: &[&str], expect_charts: usize) -> Value {
+/// Runs `foldfree param` with `extra` and checks the written atlas from the file; with
+/// `expect_charts` = None any chart count is accepted (it is still checked against the report).
+fn check_atlas(input: &Path, dir: &TempDir, extra: &[&str], expect_charts: Option<usize>) -> Value {
     let out = dir.join("out.obj");
     let rep = dir.join("out.json");
     let mut args = vec![
@@ -164,8 +166,16 @@ fn check_atlas(input: &Path, dir: &TempDir, extra: &[&str], expect_charts: usize
     }
 
     let groups = charts(&obj);
-    assert_eq!(groups.len(), expect_charts);
-    assert_eq!(report["atlas"]["charts"], expect_charts);
+    if let Some(n) = expect_charts {
+        assert_eq!(groups.len(), n);
+    }
+    assert_eq!(report["atlas"]["charts"], groups.len());
+    // Boundary crossings counted from the file alone (brute force over the vt boundary).
+    assert_eq!(
+        report["boundary_self_intersections"],
+        file_boundary_crossings(&obj),
+        "report vs file: boundary crossings"
+    );
     assert_eq!(
         report["atlas"]["texture_coordinates"].as_u64(),
         Some(obj.vt.len() as u64)
@@ -198,10 +208,83 @@ fn check_atlas(input: &Path, dir: &TempDir, extra: &[&str], expect_charts: usize
     report
 }
 
+/// Pairs of boundary segments of the file's UV layout that cross (sharing no vertex), by
+/// brute force: the boundary is every vt edge used by one face.
+fn file_boundary_crossings(obj: &objcheck::Obj) -> usize {
+    let mut count = std::collections::HashMap::<[usize; 2], usize>::new();
+    for t in obj.f_vt.iter().flatten() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *count.entry([a.min(b), a.max(b)]).or_default() += 1;
+        }
+    }
+    let segs: Vec<[usize; 2]> = count
+        .into_iter()
+        .filter(|&(_, n)| n == 1)
+        .map(|(e, _)| e)
+        .collect();
+    let p = |i: usize| obj.vt[i];
+    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    };
+    let mut n = 0;
+    for i in 0..segs.len() {
+        for j in i + 1..segs.len() {
+            let ([a, b], [c, d]) = (segs[i], segs[j]);
+            if a == c || a == d || b == c || b == d {
+                continue;
+            }
+            let (d1, d2) = (orient(p(c), p(d), p(a)), orient(p(c), p(d), p(b)));
+            let (d3, d4) = (orient(p(a), p(b), p(c)), orient(p(a), p(b), p(d)));
+            if d1 * d2 < 0.0 && d3 * d4 < 0.0 {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+#[test]
+fn chart_overlapping_itself_is_split_until_injective() {
+    // The global solver's single block chart folds its boundary over itself (5 crossings
+    // with --overlap-splits 0, in BENCHMARKS.md's sweep); by default such charts are split.
+    let dir = TempDir::new("atlas_split");
+    let r = check_atlas(
+        &data("block"),
+        &dir,
+        &["--solver", "global", "--energy", "sd"],
+        None,
+    );
+    assert_eq!(r["boundary_self_intersections"], 0);
+    let splits = r["atlas"]["overlap_splits"].as_u64().expect("splits");
+    assert!(splits >= 1);
+    assert!(r["atlas"]["charts"].as_u64().expect("charts") > 1);
+    let dir0 = TempDir::new("atlas_nosplit");
+    let r0 = check_atlas(
+        &data("block"),
+        &dir0,
+        &[
+            "--solver",
+            "global",
+            "--energy",
+            "sd",
+            "--overlap-splits",
+            "0",
+        ],
+        Some(1),
+    );
+    assert!(r0["boundary_self_intersections"].as_u64().expect("n") > 0);
+}
+
 #[test]
 fn closed_genus0_bunny_becomes_one_disk() {
     let dir = TempDir::new("atlas_bunny");
-    let r = check_atlas(&data("bunny_npm"), &dir, &["--max-iters", "200"], 1);
+    let r = check_atlas(
+        &data("bunny_npm"),
+        &dir,
+        &["--max-iters", "200", "--overlap-splits", "0"],
+        Some(1),
+    );
     assert_eq!(r["atlas"]["genus"], 0);
     assert!(r["atlas"]["seam_edges"].as_u64().expect("seams") >= 2);
 }
@@ -212,8 +295,15 @@ fn genus3_block_becomes_one_disk() {
     let r = check_atlas(
         &data("block"),
         &dir,
-        &["--max-iters", "100", "--energy", "sd"],
-        1,
+        &[
+            "--max-iters",
+            "100",
+            "--energy",
+            "sd",
+            "--overlap-splits",
+            "0",
+        ],
+        Some(1),
     );
     assert_eq!(r["atlas"]["genus"], 3);
 }
@@ -248,7 +338,19 @@ fn several_components_are_packed_apart() {
     }
     let input = dir.join("three.obj");
     fs::write(&input, out).expect("write");
-    let r = check_atlas(&input, &dir, &["--solver", "none", "--margin", "0.02"], 3);
+    let r = check_atlas(
+        &input,
+        &dir,
+        &[
+            "--solver",
+            "none",
+            "--margin",
+            "0.02",
+            "--overlap-splits",
+            "0",
+        ],
+        Some(3),
+    );
     let faces: Vec<u64> = r["atlas"]["chart_faces"]
         .as_array()
         .expect("array")
@@ -265,7 +367,7 @@ fn disk_with_cut_always_is_packed_into_the_unit_square() {
         &data("square_grid_10x10"),
         &dir,
         &["--cut", "always", "--solver", "none", "--init", "lscm"],
-        1,
+        Some(1),
     );
     assert_eq!(r["atlas"]["seam_edges"], 0);
     // A flat square maps to a square: the packing fills the unit square up to the margin.
@@ -319,7 +421,7 @@ fn shared_meshes_sweep() {
             if solver == "admm" {
                 args.extend(["--max-iters", iters.as_str()]);
             }
-            let r = check_atlas(&input, &dir, &args, 1);
+            let r = check_atlas(&input, &dir, &args, None);
             println!(
                 "| {name} | {solver} {energy} | {} | {} | {:.4} | {:.1}% | {} | {:.4} | {:.4} | {} | {} | {:.1} | {} |",
                 r["faces"],

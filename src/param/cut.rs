@@ -46,6 +46,9 @@ pub struct CutOptions {
     /// Area ratio (chart-normalised 3D area over UV area around a vertex) above which a vertex
     /// gets an extra seam.
     pub stretch_limit: f64,
+    /// At most this many splitting seams across charts whose map's boundary overlaps itself
+    /// (0: overlapping charts are kept as they are).
+    pub overlap_splits: usize,
 }
 
 impl Default for CutOptions {
@@ -54,6 +57,7 @@ impl Default for CutOptions {
             curvature_weight: 1.0,
             extra_seams: 8,
             stretch_limit: 16.0,
+            overlap_splits: 16,
         }
     }
 }
@@ -96,6 +100,33 @@ pub fn cut_to_disks_through(
     file: &Path,
     extra: &[u32],
 ) -> Result<CutMesh, crate::Error> {
+    cut_to_disks_split(mesh, topo, opts, file, extra, &[])
+}
+
+/// A seam across one chart, from one point of its boundary to another: the chart becomes two
+/// disks. Used when a chart's map overlaps itself (local injectivity, 0 flips, does not stop
+/// a long boundary from folding over the chart in UV): the two overlapping boundary parts end
+/// up in different charts, which packing keeps apart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Split {
+    /// Input vertices on the chart's boundary (the cut or the mesh boundary).
+    pub a: u32,
+    pub b: u32,
+    /// An input face of the chart to split.
+    pub face: u32,
+}
+
+/// [`cut_to_disks_through`], then the splitting seams `splits`, in order; a split whose
+/// endpoints are not both on its chart's boundary, or that finds no path through the chart's
+/// interior, is skipped (the chart stays whole).
+pub fn cut_to_disks_split(
+    mesh: &TriMesh,
+    topo: &Topology,
+    opts: &CutOptions,
+    file: &Path,
+    extra: &[u32],
+    splits: &[Split],
+) -> Result<CutMesh, crate::Error> {
     require_cuttable(mesh, topo, file)?;
     let weights = edge_weights(mesh, topo, opts.curvature_weight);
     let mut cut = vec![false; topo.edges.len()];
@@ -110,6 +141,9 @@ pub fn cut_to_disks_through(
     }
     for &target in extra {
         add_seam_to(topo, &weights, &mut cut, target);
+    }
+    for sp in splits {
+        add_split_seam(topo, &weights, &mut cut, sp);
     }
     let seam_edges: Vec<u32> = (0..topo.edges.len() as u32)
         .filter(|&e| cut[e as usize])
@@ -596,6 +630,100 @@ fn add_seam_to(topo: &Topology, weights: &[f64], cut: &mut [bool], target: u32) 
         let [x, y] = topo.edges[e as usize];
         v = if x == v { y } else { x };
     }
+}
+
+/// Cuts the shortest path from `sp.a` to `sp.b` through the interior of the chart holding
+/// `sp.face` (its inner vertices touch neither the cut nor the boundary, its edges are uncut
+/// edges between two faces of the chart): a chord of a disk, so the chart becomes two disks.
+/// Returns whether it cut.
+fn add_split_seam(topo: &Topology, weights: &[f64], cut: &mut [bool], sp: &Split) -> bool {
+    let nf = topo.face_edges.len();
+    let (a, b) = (sp.a, sp.b);
+    if a == b || sp.face as usize >= nf || a as usize >= topo.n_vertices {
+        return false;
+    }
+    if b as usize >= topo.n_vertices {
+        return false;
+    }
+    // The chart: faces reachable from sp.face across uncut interior edges.
+    let mut in_chart = vec![false; nf];
+    let mut stack = vec![sp.face];
+    in_chart[sp.face as usize] = true;
+    while let Some(f) = stack.pop() {
+        for &e in &topo.face_edges[f as usize] {
+            let [f0, f1] = topo.edge_faces[e as usize];
+            if cut[e as usize] || f1 == NO_FACE {
+                continue;
+            }
+            let g = if f0 == f { f1 } else { f0 };
+            if !in_chart[g as usize] {
+                in_chart[g as usize] = true;
+                stack.push(g);
+            }
+        }
+    }
+    let mut on_cut = vec![false; topo.n_vertices];
+    for (e, &[_, f1]) in topo.edge_faces.iter().enumerate() {
+        if cut[e] || f1 == NO_FACE {
+            for v in topo.edges[e] {
+                on_cut[v as usize] = true;
+            }
+        }
+    }
+    let touches = |v: u32| topo.vertex_faces(v).iter().any(|&f| in_chart[f as usize]);
+    if !on_cut[a as usize] || !on_cut[b as usize] || !touches(a) || !touches(b) {
+        return false;
+    }
+    let inner =
+        |v: u32| !on_cut[v as usize] && topo.vertex_faces(v).iter().all(|&f| in_chart[f as usize]);
+    let edge_ok = |e: u32| {
+        let [f0, f1] = topo.edge_faces[e as usize];
+        !cut[e as usize] && f1 != NO_FACE && in_chart[f0 as usize] && in_chart[f1 as usize]
+    };
+    let n = topo.n_vertices;
+    let mut dist = vec![f64::INFINITY; n];
+    let mut parent = vec![u32::MAX; n];
+    let mut heap = BinaryHeap::new();
+    dist[a as usize] = 0.0;
+    heap.push(Item(0.0, a));
+    let mut reached = false;
+    while let Some(Item(d, v)) = heap.pop() {
+        if d > dist[v as usize] {
+            continue;
+        }
+        if v == b {
+            reached = true;
+            break;
+        }
+        if v != a && !inner(v) {
+            continue; // only a and interior vertices are passed through
+        }
+        for &w in topo.neighbors(v) {
+            let Some(e) = edge_index(topo, v, w) else {
+                continue;
+            };
+            if !edge_ok(e) || !(w == b || inner(w)) {
+                continue;
+            }
+            let nd = d + weights[e as usize];
+            if nd < dist[w as usize] {
+                dist[w as usize] = nd;
+                parent[w as usize] = e;
+                heap.push(Item(nd, w));
+            }
+        }
+    }
+    if !reached {
+        return false;
+    }
+    let mut v = b;
+    while v != a {
+        let e = parent[v as usize];
+        cut[e as usize] = true;
+        let [x, y] = topo.edges[e as usize];
+        v = if x == v { y } else { x };
+    }
+    true
 }
 
 fn farthest(dist: &[f64]) -> u32 {
