@@ -446,6 +446,7 @@ fn run_atlas(
     // Map every chart; while some chart's boundary overlaps itself in UV, split it across
     // the overlap and map the two halves (charts left whole keep their maps).
     let mut splits: Vec<cut::Split> = Vec::new();
+    let mut failed: Vec<cut::Split> = Vec::new();
     let mut cache: std::collections::HashMap<Vec<u32>, MapOutput> = Default::default();
     let maps = loop {
         let mut maps = Vec::with_capacity(cutm.charts.len());
@@ -466,25 +467,45 @@ fn run_atlas(
                     progress,
                 )?,
             };
-            if splits.len() + new_splits.len() < job.cut_options.overlap_splits {
-                if let Some(sp) = overlap_split(&map.uv, &sub_topo, &global, &cutm.origin, faces) {
-                    new_splits.push(sp);
-                }
+            let candidates = overlap_splits(&map.uv, &sub_topo, &global, &cutm.origin, faces);
+            if !candidates.is_empty() {
+                new_splits.push(candidates);
             }
             maps.push(map);
         }
-        if new_splits.is_empty() {
-            break maps;
-        }
+        // Per overlapping chart, the first candidate seam that really splits it.
         let t = Instant::now();
-        let before = cutm.charts.len();
-        splits.extend(new_splits);
-        let recut =
-            cut::cut_to_disks_split(&input, topo, &job.cut_options, &job.input, &extra, &splits)?;
-        seconds_cut += t.elapsed().as_secs_f64();
-        if recut.charts.len() == before {
-            break maps; // no split could be cut: keep what we have
+        let mut recut: Option<cut::CutMesh> = None;
+        for candidates in new_splits {
+            if splits.len() >= job.cut_options.overlap_splits {
+                break;
+            }
+            let count = recut.as_ref().map_or(cutm.charts.len(), |c| c.charts.len());
+            for sp in candidates {
+                if failed.contains(&sp) {
+                    continue;
+                }
+                splits.push(sp);
+                let c = cut::cut_to_disks_split(
+                    &input,
+                    topo,
+                    &job.cut_options,
+                    &job.input,
+                    &extra,
+                    &splits,
+                )?;
+                if c.charts.len() > count {
+                    recut = Some(c);
+                    break;
+                }
+                splits.pop();
+                failed.push(sp);
+            }
         }
+        seconds_cut += t.elapsed().as_secs_f64();
+        let Some(recut) = recut else {
+            break maps; // nothing overlaps, or no seam could split what does
+        };
         for (faces, map) in cutm.charts.iter().zip(maps) {
             cache.insert(faces.clone(), map);
         }
@@ -618,35 +639,52 @@ fn run_atlas(
     })
 }
 
-/// Where to split a chart whose UV boundary crosses itself: at the first crossing pair of
-/// boundary segments, a seam between the midpoints of the two boundary arcs that separate
-/// them, so each half holds one of the two segments. `None` when the boundary is simple.
-fn overlap_split(
+/// Where to split a chart whose UV boundary crosses itself: for each of the first few
+/// crossing pairs of boundary segments, a seam between the midpoints of the two boundary arcs
+/// that separate them, so each half holds one of the two segments. Empty when the boundary is
+/// simple. Several candidates because a seam can fail to exist (no path through the chart's
+/// interior between the two points).
+fn overlap_splits(
     uv: &[[f64; 2]],
     topo: &Topology,
     global: &[u32],
     origin: &[u32],
     faces: &[u32],
-) -> Option<crate::param::cut::Split> {
-    let pairs = metrics::boundary_intersecting_pairs(uv, &topo.boundary_loops);
-    let [s1, s2] = *pairs.first()?;
-    let l = topo.boundary_loops.iter().find(|l| l.contains(&s1[0]))?;
-    let n = l.len();
-    let pos = |v: u32| l.iter().position(|&w| w == v);
-    let (mut i, mut j) = (pos(s1[0])?, pos(s2[0])?);
-    if i > j {
-        std::mem::swap(&mut i, &mut j);
+) -> Vec<crate::param::cut::Split> {
+    const CANDIDATES: usize = 4;
+    let Some(&face) = faces.first() else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for [s1, s2] in metrics::boundary_intersecting_pairs(uv, &topo.boundary_loops) {
+        if out.len() == CANDIDATES {
+            break;
+        }
+        let Some(l) = topo.boundary_loops.iter().find(|l| l.contains(&s1[0])) else {
+            continue;
+        };
+        let n = l.len();
+        let pos = |v: u32| l.iter().position(|&w| w == v);
+        let (Some(mut i), Some(mut j)) = (pos(s1[0]), pos(s2[0])) else {
+            continue;
+        };
+        if i > j {
+            std::mem::swap(&mut i, &mut j);
+        }
+        let input = |k: usize| origin[global[l[k % n] as usize] as usize];
+        let a = input((i + 1 + j) / 2);
+        let m2 = (j + 1 + i + n) / 2;
+        // Both sides of a seam are on the boundary: step on if the midpoints are one input
+        // vertex.
+        let Some(b) = (0..n).map(|d| input(m2 + d)).find(|&b| b != a) else {
+            continue;
+        };
+        let sp = crate::param::cut::Split { a, b, face };
+        if !out.contains(&sp) {
+            out.push(sp);
+        }
     }
-    let input = |k: usize| origin[global[l[k % n] as usize] as usize];
-    let a = input((i + 1 + j) / 2);
-    let m2 = (j + 1 + i + n) / 2;
-    // Both sides of a seam are on the boundary: step on if the midpoints are one input vertex.
-    let b = (0..n).map(|d| input(m2 + d)).find(|&b| b != a)?;
-    Some(crate::param::cut::Split {
-        a,
-        b,
-        face: *faces.first()?,
-    })
+    out
 }
 
 /// The input vertex around which a conformal (LSCM) map of its chart shrinks area the most,
