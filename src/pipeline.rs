@@ -445,6 +445,7 @@ fn run_atlas(
 
     // Map every chart; while some chart's boundary overlaps itself in UV, split it across
     // the overlap and map the two halves (charts left whole keep their maps).
+    let mut base = cut::base_cut(&input, topo, &job.cut_options, &job.input, &extra)?;
     let mut splits: Vec<cut::Split> = Vec::new();
     let mut failed: Vec<cut::Split> = Vec::new();
     let mut cache: std::collections::HashMap<Vec<u32>, MapOutput> = Default::default();
@@ -475,37 +476,27 @@ fn run_atlas(
         }
         // Per overlapping chart, the first candidate seam that really splits it.
         let t = Instant::now();
-        let mut recut: Option<cut::CutMesh> = None;
+        let before = splits.len();
         for candidates in new_splits {
             if splits.len() >= job.cut_options.overlap_splits {
                 break;
             }
-            let count = recut.as_ref().map_or(cutm.charts.len(), |c| c.charts.len());
             for sp in candidates {
                 if failed.contains(&sp) {
                     continue;
                 }
-                splits.push(sp);
-                let c = cut::cut_to_disks_split(
-                    &input,
-                    topo,
-                    &job.cut_options,
-                    &job.input,
-                    &extra,
-                    &splits,
-                )?;
-                if c.charts.len() > count {
-                    recut = Some(c);
+                if base.try_split(topo, &sp) {
+                    splits.push(sp);
                     break;
                 }
-                splits.pop();
                 failed.push(sp);
             }
         }
-        seconds_cut += t.elapsed().as_secs_f64();
-        let Some(recut) = recut else {
+        if splits.len() == before {
             break maps; // nothing overlaps, or no seam could split what does
-        };
+        }
+        let recut = base.finish(&input, topo, &job.input)?;
+        seconds_cut += t.elapsed().as_secs_f64();
         for (faces, map) in cutm.charts.iter().zip(maps) {
             cache.insert(faces.clone(), map);
         }

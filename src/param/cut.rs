@@ -127,6 +127,29 @@ pub fn cut_to_disks_split(
     extra: &[u32],
     splits: &[Split],
 ) -> Result<CutMesh, crate::Error> {
+    let mut base = base_cut(mesh, topo, opts, file, extra)?;
+    for sp in splits {
+        base.try_split(topo, sp);
+    }
+    base.finish(mesh, topo, file)
+}
+
+/// The cut edges before they are turned into charts, so splitting seams can be tried one by
+/// one without recomputing the cut graph (tree–cotree and extra seams) for each.
+#[derive(Clone, Debug)]
+pub struct BaseCut {
+    cut: Vec<bool>,
+    weights: Vec<f64>,
+}
+
+/// The cut graph of [`cut_to_disks_through`] with its `extra` seams, not yet split apart.
+pub fn base_cut(
+    mesh: &TriMesh,
+    topo: &Topology,
+    opts: &CutOptions,
+    file: &Path,
+    extra: &[u32],
+) -> Result<BaseCut, crate::Error> {
     require_cuttable(mesh, topo, file)?;
     let weights = edge_weights(mesh, topo, opts.curvature_weight);
     let mut cut = vec![false; topo.edges.len()];
@@ -142,45 +165,61 @@ pub fn cut_to_disks_split(
     for &target in extra {
         add_seam_to(topo, &weights, &mut cut, target);
     }
-    for sp in splits {
-        add_split_seam(topo, &weights, &mut cut, sp);
+    Ok(BaseCut { cut, weights })
+}
+
+impl BaseCut {
+    /// Adds the splitting seam `sp` when a path exists (see [`Split`]); a seam that is cut is
+    /// a chord of its disk chart, so the chart count grows by one exactly when this is true.
+    pub fn try_split(&mut self, topo: &Topology, sp: &Split) -> bool {
+        add_split_seam(topo, &self.weights, &mut self.cut, sp)
     }
-    let seam_edges: Vec<u32> = (0..topo.edges.len() as u32)
-        .filter(|&e| cut[e as usize])
-        .collect();
-    let seam_length = seam_edges
-        .iter()
-        .map(|&e| edge_length(mesh, topo.edges[e as usize]))
-        .sum();
-    let (split, origin) = split_vertices(mesh, topo, &cut);
-    let split_topo = Topology::build(&split, file)?;
-    let mut charts = vec![Vec::new(); split_topo.components];
-    for (f, &c) in split_topo.component_of_face.iter().enumerate() {
-        charts[c as usize].push(f as u32);
-    }
-    let out = CutMesh {
-        mesh: split,
-        origin,
-        seam_edges,
-        seam_length,
-        charts,
-    };
-    for (c, faces) in out.charts.iter().enumerate() {
-        let (sub, _) = out.chart_mesh(faces);
-        let t = Topology::build(&sub, file)?;
-        if !t.is_disk() {
-            return Err(crate::linalg::SolveError::Failed {
-                what: format!(
-                    "{}: cutting produced chart {c} ({} faces) that is a {}, not a disk",
-                    file.display(),
-                    faces.len(),
-                    t.describe()
-                ),
-            }
-            .into());
+
+    /// Splits the mesh along the cut into charts and checks each is a disk.
+    pub fn finish(
+        &self,
+        mesh: &TriMesh,
+        topo: &Topology,
+        file: &Path,
+    ) -> Result<CutMesh, crate::Error> {
+        let cut = &self.cut;
+        let seam_edges: Vec<u32> = (0..topo.edges.len() as u32)
+            .filter(|&e| cut[e as usize])
+            .collect();
+        let seam_length = seam_edges
+            .iter()
+            .map(|&e| edge_length(mesh, topo.edges[e as usize]))
+            .sum();
+        let (split, origin) = split_vertices(mesh, topo, cut);
+        let split_topo = Topology::build(&split, file)?;
+        let mut charts = vec![Vec::new(); split_topo.components];
+        for (f, &c) in split_topo.component_of_face.iter().enumerate() {
+            charts[c as usize].push(f as u32);
         }
+        let out = CutMesh {
+            mesh: split,
+            origin,
+            seam_edges,
+            seam_length,
+            charts,
+        };
+        for (c, faces) in out.charts.iter().enumerate() {
+            let (sub, _) = out.chart_mesh(faces);
+            let t = Topology::build(&sub, file)?;
+            if !t.is_disk() {
+                return Err(crate::linalg::SolveError::Failed {
+                    what: format!(
+                        "{}: cutting produced chart {c} ({} faces) that is a {}, not a disk",
+                        file.display(),
+                        faces.len(),
+                        t.describe()
+                    ),
+                }
+                .into());
+            }
+        }
+        Ok(out)
     }
-    Ok(out)
 }
 
 impl CutMesh {
