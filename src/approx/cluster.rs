@@ -106,6 +106,7 @@ pub fn cluster_faces(
         cone[c] = cone[c].max(angle_between(mean, normals[f]));
     }
     let max_cone = opts.max_cone_deg.to_radians();
+    let total_area: f64 = area.iter().sum();
 
     // Region adjacency and whether a region touches the mesh boundary.
     let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); grown];
@@ -206,18 +207,18 @@ pub fn cluster_faces(
             // smaller area (the normal deviation it introduces, weighted by how much surface
             // must turn), then return to smallest-first under θ. Relaxing θ for all merges at
             // once instead lets tiny regions swallow steep neighbours.
-            // Merges within the cone limit come first (key false < true).
-            let mut best: Option<((bool, f64), usize, usize, f64)> = None;
+            let mut best: Option<(f64, usize, usize, f64)> = None;
             for c in (0..grown).filter(|&c| alive[c]) {
                 let nc = normalize(sums[c]).unwrap_or([0.0; 3]);
                 for &m in &adj[c] {
                     let m = m as usize;
                     let cos = dot(nc, normalize(sums[m]).unwrap_or([0.0; 3]));
                     let wide = merged_cone(sums[c], cone[c], sums[m], cone[m]) > max_cone;
-                    let cost = (wide, (1.0 - cos) * area[c].min(area[m]));
-                    if best.map_or(true, |b| {
-                        cost.0 < b.0 .0 || (cost.0 == b.0 .0 && cost.1 < b.0 .1)
-                    }) {
+                    // Any merge within the limit beats every wider one: add a constant
+                    // above every possible cost (a cost is at most 2 × the whole area).
+                    let cost = (1.0 - cos) * area[c].min(area[m])
+                        + if wide { 4.0 * total_area } else { 0.0 };
+                    if best.map_or(true, |b| cost < b.0) {
                         best = Some((cost, c, m, cos));
                     }
                 }
