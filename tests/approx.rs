@@ -191,6 +191,7 @@ fn clustering_finds_six_sides_of_a_cube_and_one_region_of_a_grid() {
                 k: 24,
                 angle_deg: 20.0,
                 seed,
+                max_cone_deg: 60.0,
             },
         );
         assert_eq!(c.count, 6, "seed {seed}");
@@ -210,6 +211,7 @@ fn clustering_finds_six_sides_of_a_cube_and_one_region_of_a_grid() {
             k: 3,
             angle_deg: 20.0,
             seed: 1,
+            max_cone_deg: 60.0,
         },
     );
     assert!(c.count <= 3 && c.final_angle_deg > 20.0);
@@ -218,6 +220,7 @@ fn clustering_finds_six_sides_of_a_cube_and_one_region_of_a_grid() {
         k: 4,
         angle_deg: 20.0,
         seed: 9,
+        max_cone_deg: 60.0,
     };
     assert_eq!(
         cluster_faces(&t, &n0, &a0, &opts),
@@ -235,6 +238,7 @@ fn clustering_finds_six_sides_of_a_cube_and_one_region_of_a_grid() {
             k: 5,
             angle_deg: 20.0,
             seed: 1,
+            max_cone_deg: 60.0,
         },
     );
     assert_eq!(c.count, 1);
@@ -481,4 +485,102 @@ fn untangle_2d_fixes_an_l_shape_fan_that_tutte_folds() {
         "{c:?}"
     );
     assert_eq!(&x[..6], &outline[..]);
+}
+
+/// Open tube of radius 1 around the z axis: `seg` segments around, `rings` rows of quads,
+/// outward counter-clockwise faces.
+fn tube(seg: usize, rings: usize) -> TriMesh {
+    let mut positions = Vec::new();
+    for r in 0..=rings {
+        for s in 0..seg {
+            let t = std::f64::consts::TAU * s as f64 / seg as f64;
+            positions.push([t.cos(), t.sin(), r as f64 * 0.5]);
+        }
+    }
+    let id = |r: usize, s: usize| (r * seg + s % seg) as u32;
+    let mut faces = Vec::new();
+    for r in 0..rings {
+        for s in 0..seg {
+            faces.push([id(r, s), id(r, s + 1), id(r + 1, s + 1)]);
+            faces.push([id(r, s), id(r + 1, s + 1), id(r + 1, s)]);
+        }
+    }
+    TriMesh { positions, faces }
+}
+
+/// Largest angle (degrees) between a face normal and its region's area-weighted mean normal.
+fn widest_cone(labels: &[u32], normals: &[V3], areas: &[f64]) -> f64 {
+    let n = labels.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+    let mut sums = vec![[0.0; 3]; n];
+    for (f, &c) in labels.iter().enumerate() {
+        for i in 0..3 {
+            sums[c as usize][i] += normals[f][i] * areas[f];
+        }
+    }
+    labels
+        .iter()
+        .enumerate()
+        .map(|(f, &c)| {
+            let s = sums[c as usize];
+            let l = dot(s, s).sqrt();
+            (dot(s, normals[f]) / l)
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
+        })
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn clustering_keeps_normal_cones_within_the_limit_on_a_tube() {
+    // 24 segments of 15°: 8 regions fit under a 40° cone (up to 6 segments each).
+    let m = tube(24, 3);
+    let t = topo(&m);
+    let (n0, a0) = face_normals_areas(&m.positions, &m.faces);
+    let limited = cluster_faces(
+        &t,
+        &n0,
+        &a0,
+        &ClusterOptions {
+            k: 8,
+            angle_deg: 20.0,
+            seed: 3,
+            max_cone_deg: 40.0,
+        },
+    );
+    assert!(limited.count <= 8);
+    let w = widest_cone(&limited.face_cluster, &n0, &a0);
+    assert!(w <= 40.0 + 1e-9, "widest cone {w}°");
+    // Fewer regions than the limit allows (24 · 15° / 80° > 4): merges past it are forced,
+    // and K still holds.
+    let forced = cluster_faces(
+        &t,
+        &n0,
+        &a0,
+        &ClusterOptions {
+            k: 4,
+            angle_deg: 20.0,
+            seed: 3,
+            max_cone_deg: 40.0,
+        },
+    );
+    assert!(forced.count <= 4);
+    assert!(widest_cone(&forced.face_cluster, &n0, &a0) > 40.0);
+}
+
+#[test]
+fn pipeline_on_a_tube_gives_planar_strips_without_folds() {
+    // A closed ring of strips (open tube): every strip meets two neighbours along lines
+    // parallel to the axis, so exact planarity is reachable without folds.
+    let m = tube(24, 4);
+    let t = topo(&m);
+    let out = approximate(&m, &t, &ApproxOptions::new(8), &mut |_| {}).unwrap();
+    let r = &out.report;
+    assert!(
+        r.k_obtained <= 8 && r.k_obtained >= 3,
+        "{} regions",
+        r.k_obtained
+    );
+    assert!(r.max_planarity_deviation_rel <= 1e-6);
+    assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
 }

@@ -23,6 +23,10 @@ pub struct ClusterOptions {
     /// θ in degrees.
     pub angle_deg: f64,
     pub seed: u64,
+    /// Largest normal cone (degrees, half-angle about the region's mean normal) a merge may
+    /// create; merges that would exceed it are made only when no other merge is left. A region
+    /// whose faces turn by more than this cannot be flattened onto one plane without folding.
+    pub max_cone_deg: f64,
 }
 
 /// A partition of the faces.
@@ -60,6 +64,7 @@ pub fn cluster_faces(
         order.swap(i, j);
     }
     let cos_t = opts.angle_deg.to_radians().cos();
+    let cos_cone = opts.max_cone_deg.to_radians().cos();
     let mut label = vec![u32::MAX; nf];
     let mut sums: Vec<V3> = Vec::new();
     let mut area: Vec<f64> = Vec::new();
@@ -79,7 +84,9 @@ pub fn cluster_faces(
                     continue;
                 }
                 let mean = normalize(sum).unwrap_or(normals[s]);
-                if dot(mean, normals[g]) >= cos_t {
+                // Anchored at the seed too: the mean drifts as the region grows, and without an
+                // anchor a region can creep around a cylinder until it holds opposite normals.
+                if dot(mean, normals[g]) >= cos_t && dot(normals[s], normals[g]) >= cos_cone {
                     label[g] = c;
                     sum = add(sum, scale(normals[g], areas[g]));
                     a += areas[g];
@@ -91,6 +98,15 @@ pub fn cluster_faces(
         area.push(a);
     }
     let grown = sums.len();
+    // Half-angle of each grown region's normal cone about its mean normal (radians).
+    let mut cone = vec![0.0f64; grown];
+    for f in 0..nf {
+        let c = label[f] as usize;
+        let mean = normalize(sums[c]).unwrap_or(normals[f]);
+        cone[c] = cone[c].max(angle_between(mean, normals[f]));
+    }
+    let max_cone = opts.max_cone_deg.to_radians();
+    let total_area: f64 = area.iter().sum();
 
     // Region adjacency and whether a region touches the mesh boundary.
     let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); grown];
@@ -118,7 +134,9 @@ pub fn cluster_faces(
                      sums: &mut Vec<V3>,
                      area: &mut Vec<f64>,
                      alive: &mut Vec<bool>,
-                     open: &mut Vec<bool>| {
+                     open: &mut Vec<bool>,
+                     cone: &mut Vec<f64>| {
+        cone[into] = merged_cone(sums[c], cone[c], sums[into], cone[into]);
         parent[c] = into as u32;
         alive[c] = false;
         sums[into] = add(sums[into], sums[c]);
@@ -135,10 +153,19 @@ pub fn cluster_faces(
         adj[into].remove(&(c as u32));
         adj[into].remove(&(into as u32));
     };
-    let closest = |c: usize, adj: &Vec<BTreeSet<u32>>, sums: &Vec<V3>| -> Option<(usize, f64)> {
+    let closest = |c: usize,
+                   adj: &Vec<BTreeSet<u32>>,
+                   sums: &Vec<V3>,
+                   cone: Option<&Vec<f64>>|
+     -> Option<(usize, f64)> {
         let nc = normalize(sums[c]).unwrap_or([0.0; 3]);
         adj[c]
             .iter()
+            .filter(|&&m| {
+                cone.map_or(true, |k| {
+                    merged_cone(sums[c], k[c], sums[m as usize], k[m as usize]) <= max_cone
+                })
+            })
             .map(|&m| {
                 let nm = normalize(sums[m as usize]).unwrap_or([0.0; 3]);
                 (m as usize, dot(nc, nm))
@@ -159,13 +186,15 @@ pub fn cluster_faces(
             if !alive[c] || k != key(area[c]) {
                 continue;
             }
-            let Some((m, cos)) = closest(c, &adj, &sums) else {
-                continue; // an isolated component: nothing to merge with
+            let Some((m, cos)) = closest(c, &adj, &sums, Some(&cone)) else {
+                continue; // isolated, or every merge would widen the cone too much
             };
             if cos < cos_a {
                 continue; // above θ: skipped, as in the paper
             }
-            merge(c, m, &mut adj, &mut sums, &mut area, &mut alive, &mut open);
+            merge(
+                c, m, &mut adj, &mut sums, &mut area, &mut alive, &mut open, &mut cone,
+            );
             n_alive -= 1;
             merged_any = true;
             heap.push(Reverse((key(area[m]), m)));
@@ -184,7 +213,11 @@ pub fn cluster_faces(
                 for &m in &adj[c] {
                     let m = m as usize;
                     let cos = dot(nc, normalize(sums[m]).unwrap_or([0.0; 3]));
-                    let cost = (1.0 - cos) * area[c].min(area[m]);
+                    let wide = merged_cone(sums[c], cone[c], sums[m], cone[m]) > max_cone;
+                    // Any merge within the limit beats every wider one: add a constant
+                    // above every possible cost (a cost is at most 2 × the whole area).
+                    let cost = (1.0 - cos) * area[c].min(area[m])
+                        + if wide { 4.0 * total_area } else { 0.0 };
                     if best.map_or(true, |b| cost < b.0) {
                         best = Some((cost, c, m, cos));
                     }
@@ -195,7 +228,7 @@ pub fn cluster_faces(
             };
             let (small, big) = if area[c] <= area[m] { (c, m) } else { (m, c) };
             merge(
-                small, big, &mut adj, &mut sums, &mut area, &mut alive, &mut open,
+                small, big, &mut adj, &mut sums, &mut area, &mut alive, &mut open, &mut cone,
             );
             n_alive -= 1;
             angle = angle.max(cos.clamp(-1.0, 1.0).acos().to_degrees());
@@ -206,10 +239,12 @@ pub fn cluster_faces(
         let bad =
             (0..grown).find(|&c| alive[c] && !open[c] && adj[c].len() < 3 && !adj[c].is_empty());
         let Some(c) = bad else { break };
-        let Some((m, _)) = closest(c, &adj, &sums) else {
+        let Some((m, _)) = closest(c, &adj, &sums, None) else {
             break;
         };
-        merge(c, m, &mut adj, &mut sums, &mut area, &mut alive, &mut open);
+        merge(
+            c, m, &mut adj, &mut sums, &mut area, &mut alive, &mut open, &mut cone,
+        );
     }
     let find = |mut c: usize| {
         while parent[c] as usize != c {
@@ -236,6 +271,22 @@ pub fn cluster_faces(
         grown,
         final_angle_deg: angle,
     }
+}
+
+/// Angle (radians) between unit vectors.
+fn angle_between(a: V3, b: V3) -> f64 {
+    dot(a, b).clamp(-1.0, 1.0).acos()
+}
+
+/// Upper bound of the normal-cone half-angle of the union of two regions with area-weighted
+/// normal sums `sa`, `sb` and cones `ca`, `cb`: every member normal is within its old cone of
+/// its old mean, which is a known angle from the new mean.
+fn merged_cone(sa: V3, ca: f64, sb: V3, cb: f64) -> f64 {
+    let (Some(na), Some(nb), Some(n)) = (normalize(sa), normalize(sb), normalize(add(sa, sb)))
+    else {
+        return std::f64::consts::PI;
+    };
+    (ca + angle_between(n, na)).max(cb + angle_between(n, nb))
 }
 
 /// Sorted distinct regions around each vertex.
@@ -535,4 +586,20 @@ pub fn smooth_boundaries(topo: &Topology, face_cluster: &mut [u32], max_passes: 
         }
     }
     moved
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn merged_cone_of_two_flat_regions_at_right_angles_is_half_their_angle() {
+        let c = merged_cone([2.0, 0.0, 0.0], 0.0, [0.0, 2.0, 0.0], 0.0);
+        assert!((c - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
+        // A region's own cone adds on top; the larger region pulls the mean its way.
+        let c = merged_cone([3.0, 0.0, 0.0], 0.1, [0.0, 1.0, 0.0], 0.0);
+        let to_small = (1.0f64).atan2(3.0);
+        let expect = (0.1 + to_small).max(std::f64::consts::FRAC_PI_2 - to_small);
+        assert!((c - expect).abs() < 1e-12);
+    }
 }

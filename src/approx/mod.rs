@@ -4,16 +4,23 @@
 //! Pipeline (all CPU, sparse systems solved by CG):
 //! 1. [`normals_l0`]: L0 smoothing of face normals (ALM) → piecewise-constant normals;
 //! 2. [`vertex_update`]: vertices follow the smoothed normals (Poisson-type least squares);
-//! 3. [`cluster`]: region growing + merging down to ≤ K regions; the vertices are then pulled
+//! 3. [`cluster`]: region growing + merging down to ≤ K regions, no region's normal cone wider
+//!    than `max_cone_deg` while other merges are left (a region that turns more cannot be
+//!    flattened without folding), then [`lloyd`] relaxation so that boundaries run where the
+//!    normal is equally far from both sides (along the planes' intersection direction); the
+//!    vertices are then pulled
 //!    once more towards the regions' mean normals (stage 2 again), so stage 4 only has to
 //!    remove a small residual instead of folding curved regions flat;
 //! 4. [`boundary_l0`]: boundary-vertex L0 with planarity constraints (ALM), then projection;
+//!    regions that still fold are split in two with unused budget (< K regions) and stage 4
+//!    rerun, keeping the pass with the fewest bad faces;
 //! 5. [`polygons`]: one polygon per region, corners where boundaries meet or turn.
 #![forbid(unsafe_code)]
 
 pub mod boundary_l0;
 pub mod cluster;
 pub mod geom;
+pub mod lloyd;
 pub mod normals_l0;
 pub mod polygons;
 pub mod sparse;
@@ -63,8 +70,13 @@ pub struct ApproxOptions {
     pub angle_deg: f64,
     pub normals: NormalL0Options,
     pub vertices: VertexUpdateOptions,
+    /// Rounds of L2,1 Lloyd relaxation of the grown regions (see [`lloyd`]); 0 = off.
+    pub lloyd_rounds: usize,
     /// Majority filter on region boundaries before planarity (see `cluster::smooth_boundaries`).
     pub smooth_boundaries: bool,
+    /// Largest normal cone half-angle (degrees) a clustering merge may create when others are
+    /// left (see `cluster::ClusterOptions::max_cone_deg`).
+    pub max_cone_deg: f64,
     /// Lower θ (×0.75) while region growing gives fewer than K regions.
     pub adapt_angle: bool,
     /// Smallest θ tried by the adaptation.
@@ -74,6 +86,8 @@ pub struct ApproxOptions {
     pub corner_reach_rel: f64,
     /// … and farther than this × the vertex's distance to those planes.
     pub corner_amplification: f64,
+    /// Rounds of "split the regions that still fold, planarize again", while regions < K.
+    pub max_split_passes: usize,
     /// Rounds of "merge the regions that still fold, planarize again".
     pub max_merge_passes: usize,
     pub boundary: BoundaryL0Options,
@@ -88,10 +102,13 @@ impl ApproxOptions {
             normals: NormalL0Options::default(),
             vertices: VertexUpdateOptions::default(),
             max_merge_passes: 0,
+            max_split_passes: 2,
             corner_reach_rel: 0.04,
             corner_amplification: 8.0,
             adapt_angle: true,
             smooth_boundaries: true,
+            lloyd_rounds: 30,
+            max_cone_deg: 45.0,
             min_angle_deg: 3.0,
             boundary: BoundaryL0Options::default(),
         }
@@ -177,6 +194,11 @@ pub struct ApproxReport {
     /// Regions whose interior was re-embedded or untangled in their plane (see
     /// `untangle::embed_folded_regions`).
     pub regions_untangled: usize,
+    /// Lloyd rounds that changed the partition (see [`lloyd`]).
+    pub lloyd_rounds: usize,
+    /// Folding regions split in two with unused budget, and the passes that did it.
+    pub regions_split: usize,
+    pub split_passes: usize,
     /// Passes that merged still-folding regions into a neighbour.
     pub merge_passes: usize,
     /// Region merges at corners whose planes meet too far away, and of closed regions left
@@ -258,6 +280,7 @@ pub fn approximate(
                 k: opts.k,
                 angle_deg: angle,
                 seed: opts.seed,
+                max_cone_deg: opts.max_cone_deg,
             },
         );
         if cl.grown >= opts.k || angle < opts.min_angle_deg || !opts.adapt_angle {
@@ -266,6 +289,7 @@ pub fn approximate(
         angle *= 0.75;
     };
     let mut face_cluster = cl.face_cluster.clone();
+    let lloyd_rounds = lloyd::relax(topo, &sm.normals, &a1, &mut face_cluster, opts.lloyd_rounds);
     let smoothed = if opts.smooth_boundaries {
         cluster::smooth_boundaries(topo, &mut face_cluster, 16)
     } else {
@@ -305,7 +329,8 @@ pub fn approximate(
     )> = None;
     let mut merge_passes = 0;
     let mut n_clusters = n_clusters;
-    for pass in 0..=opts.max_merge_passes {
+    let (mut split_passes, mut regions_split) = (0, 0);
+    loop {
         progress(Stage::Vertices);
         let t = Instant::now();
         let mut sums = vec![[0.0; 3]; n_clusters];
@@ -354,7 +379,33 @@ pub fn approximate(
         if better {
             best = Some((nbad, fc_now, n_clusters, pl, ut));
         }
-        if nbad == 0 || pass == opts.max_merge_passes || n_clusters <= 1 {
+        if nbad == 0 {
+            break;
+        }
+        // Unused budget first: split the regions that fold (most bad faces first), each into
+        // two halves that turn half as much, and planarize again.
+        let budget = opts.k.saturating_sub(n_clusters);
+        if split_passes < opts.max_split_passes && budget > 0 {
+            split_passes += 1;
+            let t = Instant::now();
+            let mut per_region = vec![0usize; n_clusters];
+            for &f in &bad {
+                per_region[face_cluster[f] as usize] += 1;
+            }
+            bad_regions.sort_by_key(|&c| std::cmp::Reverse(per_region[c as usize]));
+            let mut next = n_clusters as u32;
+            for &c in bad_regions.iter().take(budget) {
+                if lloyd::split_region(topo, &n0, &a0, &mut face_cluster, c, next, 10) {
+                    regions_split += 1;
+                    next += 1;
+                }
+            }
+            cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
+            n_clusters = renumber(&mut face_cluster);
+            times.cluster += t.elapsed().as_secs_f64();
+            continue;
+        }
+        if merge_passes >= opts.max_merge_passes || n_clusters <= 1 {
             break;
         }
         merge_passes += 1;
@@ -451,6 +502,9 @@ pub fn approximate(
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
         regions_untangled: ut.regions_embedded,
+        lloyd_rounds,
+        regions_split,
+        split_passes,
         merge_passes,
         corner_merges: corner_merges + collapse_merges,
         vertices_on_4plus_planes: pl.vertices_on_4plus,
