@@ -1,18 +1,18 @@
 //! Anderson acceleration of the ADMM fixed-point map (Zhang, Peng, Ouyang, Deng 2019,
 //! "Accelerating ADMM for efficient simulation and optimization").
 //!
-//! One ADMM iteration is a map `G` of the edge state `x = (Y, Λ/μ)`: the face step reads only
-//! `Y` and `Λ` (its warm start `A` has no influence on the exact minimiser), the edge and dual
-//! steps then produce the next `(Y, Λ)`. Plain ADMM is the fixed-point iteration `x ← G(x)`,
+//! One ADMM iteration is a map `G` of the edge state: the face step reads only `Y` and `Λ` (its
+//! warm start `A` has no influence on the exact minimiser), the edge and dual steps then produce
+//! the next `(Y, Λ)`, which the CPU backend reduces to `w = Y − Λ/μ` (see
+//! `cpu::pack_state`: `Y` and `Λ/μ` are the two orthogonal components of `w`). Plain ADMM is the fixed-point iteration `x ← G(x)`,
 //! which converges linearly and, for symmetric Dirichlet on large meshes, slowly: the consensus
 //! moves information about one face per iteration. Anderson acceleration extrapolates from the
 //! last `m` iterates, `x⁺ = G(x) − Σ_j θ_j ΔG_j` with `θ = argmin ‖f − Σ_j θ_j Δf_j‖`
 //! (`f = G(x) − x`), solved here through the `m×m` normal equations with a small ridge, the
 //! form the device port would use (partial dot products by reduction, one tiny solve).
 //!
-//! The dual is scaled by `1/μ` so both halves of `x` are in the units of a Jacobian; without it
-//! the least-squares problem is dominated by whichever half has the larger numbers. A change of
-//! `μ` changes `G` itself, so the history must be discarded then ([`Anderson::reset`]).
+//! The dual enters scaled by `1/μ` so it is in the units of a Jacobian. A change of `μ` changes
+//! `G` itself, so the history must be discarded then ([`Anderson::reset`]).
 
 #![forbid(unsafe_code)]
 

@@ -47,7 +47,8 @@ struct Accelerator {
     a_in: Vec<[f64; 4]>,
     accepted: usize,
     rejected: usize,
-    /// Scratch: `(Y, Λ/μ)` flattened, input and output of one iteration.
+    /// Scratch: the reduced state `w = Y − Λ/μ` ([`pack_state`]), input and output of one
+    /// iteration.
     x: Vec<f64>,
     g: Vec<f64>,
 }
@@ -60,20 +61,51 @@ impl Accelerator {
     }
 }
 
-/// Writes `(Y, Λ/μ)` flattened into `out`.
+/// Writes the reduced edge state `w_t = Y_t − Λ_t/μ` flattened into `out`.
+///
+/// After one iteration `Y = P w` and `Λ/μ = Y − w = −P⊥ w`, with `P` the (orthogonal, per
+/// edge) projection onto the consensus set `{Y1 ê1 = Y2 ê2}` that the edge step applies and
+/// `P⊥ = I − P`: the edge step makes `Y` consistent and the dual step leaves `Λ` in the
+/// complement. So `w` alone determines the next iteration (the Douglas–Rachford form of this
+/// ADMM), and since `(Y, Λ/μ) ↦ w` is an isometry on such states, Anderson on `w` takes the
+/// same steps as on `(Y, Λ/μ)` over half the data.
 fn pack_state(state: &AdmmState, mu: f64, out: &mut Vec<f64>) {
-    out.clear();
-    out.extend_from_slice(state.y.as_flattened());
-    out.extend(state.lambda.as_flattened().iter().map(|l| l / mu));
+    out.resize(state.y.len() * 4, 0.0);
+    out.par_chunks_mut(4)
+        .zip(state.y.par_iter().zip(state.lambda.par_iter()))
+        .for_each(|(w, (y, l))| {
+            for i in 0..4 {
+                w[i] = y[i] - l[i] / mu;
+            }
+        });
 }
 
-/// Inverse of [`pack_state`] for the edge state (`A` is left alone).
-fn unpack_state(v: &[f64], mu: f64, state: &mut AdmmState) {
-    let n = state.y.len() * 4;
-    state.y.as_flattened_mut().copy_from_slice(&v[..n]);
-    for (l, x) in state.lambda.as_flattened_mut().iter_mut().zip(&v[n..]) {
-        *l = x * mu;
-    }
+/// Inverse of [`pack_state`] for the edge state (`A` is left alone): `Y = P w`,
+/// `Λ = μ (Y − w)`.
+fn unpack_state(problem: &AdmmProblem, v: &[f64], mu: f64, state: &mut AdmmState) {
+    state
+        .y
+        .par_chunks_mut(2)
+        .zip(state.lambda.par_chunks_mut(2))
+        .zip(v.par_chunks(8))
+        .enumerate()
+        .for_each(|(i, ((y, l), w))| {
+            let w1: [f64; 4] = std::array::from_fn(|k| w[k]);
+            let w2: [f64; 4] = std::array::from_fn(|k| w[4 + k]);
+            let (y1, y2) = kernels::edge_project(
+                &w1,
+                &w2,
+                &[0.0; 4],
+                &[0.0; 4],
+                &problem.slot_dir[2 * i],
+                &problem.slot_dir[2 * i + 1],
+                mu,
+            );
+            y[0] = y1;
+            y[1] = y2;
+            l[0] = std::array::from_fn(|k| mu * (y1[k] - w1[k]));
+            l[1] = std::array::from_fn(|k| mu * (y2[k] - w2[k]));
+        });
 }
 
 /// `Σ_t ‖Y⁺_t − A⁺_ft‖² + ‖Y⁺_t − Y_t‖²`, with `Y` the last iteration's input.
@@ -190,7 +222,7 @@ impl<'p> CpuExecutor<'p> {
             std::mem::swap(&mut acc.fallback_a_prev, &mut acc.a_in);
             pack_state(&self.state, mu, &mut acc.g);
             acc.aa.step(&acc.x, &mut acc.g);
-            unpack_state(&acc.g, mu, &mut self.state);
+            unpack_state(self.problem, &acc.g, mu, &mut self.state);
         } else {
             // The accelerated input made things worse: continue from the plain output of the
             // last accepted block, with a fresh history.

@@ -24,7 +24,7 @@ pub enum Accel {
     /// Plain ADMM.
     #[default]
     None,
-    /// Anderson acceleration of `(Y, Λ/μ)` with a residual safeguard (CPU backend only).
+    /// Anderson acceleration of the edge state with a residual safeguard (CPU backend only).
     Anderson,
 }
 
