@@ -409,3 +409,49 @@ impl Executor for CpuExecutor<'_> {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh;
+    use crate::pipeline::{initial_map, normalize_area, InitMethod};
+
+    /// After one iteration the edge state is consistent (`Y` in the consensus set, `Λ` in its
+    /// complement), so the reduced state `w` determines it exactly: unpacking a packed state
+    /// gives it back, which is what lets Anderson work on half the data.
+    #[test]
+    fn reduced_edge_state_round_trips_after_an_iteration() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/camel_open.obj");
+        let (m, t, _) = mesh::load(&path, &mesh::ValidateOptions::default()).expect("test mesh");
+        let frames = mesh::frames::compute(&m);
+        let p = AdmmProblem::new(&m, &t, &frames);
+        let mut uv = initial_map(&m, &t, InitMethod::Lscm).expect("lscm");
+        normalize_area(&m, &mut uv, frames.area.iter().sum());
+        let mut s = AdmmState::from_uv(&p, &m.faces, &uv);
+        let mu = 300.0 / p.n_faces() as f64;
+        for _ in 0..3 {
+            iteration(&p, &mut s, Energy::SymmetricDirichlet, 1, mu);
+        }
+        let mut w = Vec::new();
+        pack_state(&s, mu, &mut w);
+        let mut back = s.clone();
+        back.y.iter_mut().for_each(|y| *y = [9.0; 4]);
+        back.lambda.iter_mut().for_each(|l| *l = [-9.0; 4]);
+        unpack_state(&p, &w, mu, &mut back);
+        let scale = s
+            .lambda
+            .iter()
+            .flatten()
+            .fold(1.0f64, |m, x| m.max(x.abs()));
+        for (a, b) in
+            s.y.iter()
+                .zip(&back.y)
+                .chain(s.lambda.iter().zip(&back.lambda))
+        {
+            for i in 0..4 {
+                assert!((a[i] - b[i]).abs() <= 1e-9 * scale, "{a:?} vs {b:?}");
+            }
+        }
+    }
+}
