@@ -41,12 +41,12 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
 #[derive(Clone, Debug)]
 pub struct Anderson {
     depth: usize,
-    /// Ring buffer of `ΔG_j = G(x_j+1) − G(x_j)`. Stored in f32: the passes over the history
-    /// are memory-bound and dominate the cost of a step, and the differences only shape the
-    /// extrapolation (which the safeguard checks), they never enter the iterate unrounded.
-    dg: Vec<Vec<f32>>,
-    /// Ring buffer of `Δf_j = f_j+1 − f_j` (f32, as `dg`).
-    df: Vec<Vec<f32>>,
+    /// Ring buffer of `ΔG_j = G(x_j+1) − G(x_j)`. f64: with f32 differences the combination
+    /// `Σ θ_j ΔG_j` (θ large when the Δf are nearly collinear) lost enough precision to cost
+    /// face.obj SD 2875 instead of 1725 iterations (BENCHMARKS.md).
+    dg: Vec<Vec<f64>>,
+    /// Ring buffer of `Δf_j = f_j+1 − f_j`.
+    df: Vec<Vec<f64>>,
     /// `gram[i·depth + j] = Δf_i · Δf_j` over the stored columns.
     gram: Vec<f64>,
     /// Stored columns (≤ depth) and the ring position of the next one.
@@ -103,7 +103,6 @@ impl Anderson {
             let mut dg = std::mem::take(&mut self.dg[slot]);
             df.resize(n, 0.0);
             dg.resize(n, 0.0);
-            // `as f32` rounds to nearest; the history is deliberately single precision.
             prev_f
                 .par_chunks_mut(DOT_CHUNK)
                 .zip(prev_g.par_chunks_mut(DOT_CHUNK))
@@ -113,8 +112,8 @@ impl Anderson {
                 .for_each(|((((pf, pg), df), dg), (x, g))| {
                     for i in 0..x.len() {
                         let f = g[i] - x[i];
-                        df[i] = (f - pf[i]) as f32;
-                        dg[i] = (g[i] - pg[i]) as f32;
+                        df[i] = f - pf[i];
+                        dg[i] = g[i] - pg[i];
                         pf[i] = f;
                         pg[i] = g[i];
                     }
@@ -157,9 +156,8 @@ impl Anderson {
                     let col = &col[r.clone()];
                     let (mut gj, mut rj) = (0.0, 0.0);
                     for i in 0..col.len() {
-                        let c = f64::from(col[i]);
-                        gj += f64::from(new[i]) * c;
-                        rj += c * fc[i];
+                        gj += new[i] * col[i];
+                        rj += col[i] * fc[i];
                     }
                     acc[j] = gj;
                     acc[m + j] = rj;
@@ -189,7 +187,7 @@ impl Anderson {
                 for (t, d) in theta.iter().zip(dg) {
                     let d = &d[o..o + out.len()];
                     for (v, d) in out.iter_mut().zip(d) {
-                        *v -= t * f64::from(*d);
+                        *v -= t * d;
                     }
                 }
             });
