@@ -26,17 +26,6 @@ const DOT_CHUNK: usize = 8192;
 /// as the iteration converges, and an unregularised solve then returns huge, cancelling θ.
 const RIDGE: f64 = 1e-10;
 
-/// `Σ a_i b_i` in fixed chunks summed in order.
-pub fn dot(a: &[f64], b: &[f64]) -> f64 {
-    debug_assert_eq!(a.len(), b.len());
-    a.par_chunks(DOT_CHUNK)
-        .zip(b.par_chunks(DOT_CHUNK))
-        .map(|(x, y)| x.iter().zip(y).map(|(x, y)| x * y).sum::<f64>())
-        .collect::<Vec<_>>()
-        .iter()
-        .sum()
-}
-
 /// History of differences and the Gram matrix of the `Δf` columns.
 #[derive(Clone, Debug)]
 pub struct Anderson {
