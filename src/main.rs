@@ -363,6 +363,14 @@ enum EnergyArg {
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
+enum AccelArg {
+    /// Plain ADMM.
+    None,
+    /// Anderson acceleration with a residual safeguard (CPU backend only).
+    Anderson,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
 enum BackendArg {
     /// Vulkan on a real GPU, else the CPU backend.
     Auto,
@@ -421,6 +429,15 @@ struct ParamArgs {
     /// Newton steps per face per iteration.
     #[arg(long)]
     newton_iters: Option<u32>,
+    /// Acceleration of the ADMM iteration; `anderson` runs on the CPU backend only.
+    #[arg(long, value_enum, default_value = "none")]
+    accel: AccelArg,
+    /// Anderson history length (with `--accel anderson`).
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u64).range(1..=32))]
+    aa_depth: u64,
+    /// ADMM iterations per Anderson step (with `--accel anderson`).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    aa_every: u64,
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -845,12 +862,18 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         || args.tol_dual.is_some()
         || args.tol_energy.is_some()
         || args.newton_iters.is_some()
+        || !matches!(args.accel, AccelArg::None)
         || matches!(args.backend, BackendArg::Vulkan);
     if solver == SolverChoice::Global && admm_only {
         return Err(foldfree::Error::Usage(
             "--solver global runs on the CPU with its own stopping rule: --backend vulkan, \
-             --mu, --max-iters, --resync, --tol-* and --newton-iters apply to ADMM only"
+             --mu, --max-iters, --resync, --tol-*, --newton-iters and --accel apply to ADMM only"
                 .into(),
+        ));
+    }
+    if !matches!(args.accel, AccelArg::None) && matches!(args.backend, BackendArg::Vulkan) {
+        return Err(foldfree::Error::Usage(
+            "--accel anderson runs on the CPU backend only (use --backend cpu or auto)".into(),
         ));
     }
     let init = match args.init {
@@ -895,11 +918,22 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     if let Some(n) = args.newton_iters {
         admm.newton_iters = n;
     }
+    admm.accel = match args.accel {
+        AccelArg::None => foldfree::param::admm::Accel::None,
+        AccelArg::Anderson => foldfree::param::admm::Accel::Anderson,
+    };
+    admm.aa_depth = args.aa_depth as usize;
+    admm.aa_every = args.aa_every as usize;
+    let admm_accel_cpu_only = admm.accel != foldfree::param::admm::Accel::None;
     admm.stop = Some(stop);
     let mut job = ParamJob::new(&args.input, &args.output);
     job.init = init;
     job.solver = solver;
-    job.backend = backend_of(args.backend);
+    job.backend = match (args.backend, admm_accel_cpu_only) {
+        // Anderson acceleration exists on the CPU backend only: `auto` means the CPU then.
+        (BackendArg::Auto, true) => BackendChoice::Cpu,
+        (b, _) => backend_of(b),
+    };
     job.device = args.device.clone();
     job.validation = args.validation;
     job.profile = args.profile;

@@ -244,6 +244,11 @@ pub fn compute_map(
             )
         };
         let result = match ctx {
+            Some(_) if opts.accel != admm::Accel::None => {
+                return Err(crate::Error::Usage(
+                    "--accel anderson runs on the CPU backend only (use --backend cpu)".into(),
+                ));
+            }
             Some(ctx) => {
                 let mut exec = admm::vulkan::VulkanExecutor::new(
                     ctx,
@@ -268,7 +273,8 @@ pub fn compute_map(
             }
             None => {
                 let mut exec =
-                    admm::cpu::CpuExecutor::new(&problem, opts.energy, opts.newton_iters);
+                    admm::cpu::CpuExecutor::new(&problem, opts.energy, opts.newton_iters)
+                        .with_accel(opts.accel, opts.aa_depth, opts.aa_every);
                 solve(&mut exec)?
             }
         };

@@ -308,6 +308,8 @@ fn convergence_plots_of_synthetic_history() {
             energy_change: 1.0 / (k * k) as f64,
             recovered_flips: (k % 10 == 0).then_some(0),
             recovered_energy: (k % 10 == 0).then_some(2.0 + 1.1 / k as f64),
+            accel_accepted: None,
+            accel_rejected: None,
         })
         .collect();
     let svg = viz::convergence_svg(&history);

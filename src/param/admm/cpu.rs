@@ -7,7 +7,8 @@ use rayon::prelude::*;
 /// Elements per partial sum in [`residuals`] (fixed, so the summation order is too).
 const SUM_CHUNK: usize = 4096;
 
-use super::driver::{Executor, Residuals};
+use super::anderson::Anderson;
+use super::driver::{Accel, Executor, Residuals};
 use super::kernels;
 use super::{AdmmProblem, AdmmState, NO_SLOT};
 use crate::param::energy::{self, Energy};
@@ -18,6 +19,114 @@ pub struct CpuExecutor<'p> {
     energy: Energy,
     newton_iters: u32,
     state: AdmmState,
+    accel: Option<Accelerator>,
+}
+
+/// Anderson acceleration with the safeguard of Zhang et al. 2019: an accelerated step is kept
+/// only while the combined residual `Σ‖Y⁺ − A⁺‖² + Σ‖Y⁺ − Y‖²` of the iteration it feeds keeps
+/// decreasing; otherwise the iterate goes back to the last plain ADMM output and the history is
+/// dropped. So the worst case is plain ADMM plus one wasted iteration per rejection.
+struct Accelerator {
+    aa: Anderson,
+    /// The last accepted plain ADMM output, to fall back to; the driver's residuals are
+    /// measured on it (the accelerated `(Y, Λ)` is an extrapolation, not an ADMM iterate).
+    fallback: AdmmState,
+    /// `A` before the iteration that produced `fallback` (for the dual residual).
+    fallback_a_prev: Vec<[f64; 4]>,
+    /// Combined residual of the last accepted iteration.
+    last_residual: f64,
+    /// The next iteration is accepted unconditionally (start, after a reset or a rejection).
+    restart: bool,
+    /// μ and block length the history was built with.
+    mu: f64,
+    block: usize,
+    /// Iterations per Anderson step.
+    every: usize,
+    /// `Y` and `A` before the last iteration of a block (buffers reused across iterations).
+    y_last: Vec<[f64; 4]>,
+    a_in: Vec<[f64; 4]>,
+    accepted: usize,
+    rejected: usize,
+    /// Scratch: the reduced state `w = Y − Λ/μ` ([`pack_state`]), input and output of one
+    /// iteration.
+    x: Vec<f64>,
+    g: Vec<f64>,
+}
+
+impl Accelerator {
+    fn reset(&mut self) {
+        self.aa.reset();
+        self.restart = true;
+        self.last_residual = f64::INFINITY;
+    }
+}
+
+/// Writes the reduced edge state `w_t = Y_t − Λ_t/μ` flattened into `out`.
+///
+/// After one iteration `Y = P w` and `Λ/μ = Y − w = −P⊥ w`, with `P` the (orthogonal, per
+/// edge) projection onto the consensus set `{Y1 ê1 = Y2 ê2}` that the edge step applies and
+/// `P⊥ = I − P`: the edge step makes `Y` consistent and the dual step leaves `Λ` in the
+/// complement. So `w` alone determines the next iteration (the Douglas–Rachford form of this
+/// ADMM), and since `(Y, Λ/μ) ↦ w` is an isometry on such states, Anderson on `w` takes the
+/// same steps as on `(Y, Λ/μ)` over half the data.
+fn pack_state(state: &AdmmState, mu: f64, out: &mut Vec<f64>) {
+    out.resize(state.y.len() * 4, 0.0);
+    out.par_chunks_mut(4)
+        .zip(state.y.par_iter().zip(state.lambda.par_iter()))
+        .for_each(|(w, (y, l))| {
+            for i in 0..4 {
+                w[i] = y[i] - l[i] / mu;
+            }
+        });
+}
+
+/// Inverse of [`pack_state`] for the edge state (`A` is left alone): `Y = P w`,
+/// `Λ = μ (Y − w)`.
+fn unpack_state(problem: &AdmmProblem, v: &[f64], mu: f64, state: &mut AdmmState) {
+    state
+        .y
+        .par_chunks_mut(2)
+        .zip(state.lambda.par_chunks_mut(2))
+        .zip(v.par_chunks(8))
+        .enumerate()
+        .for_each(|(i, ((y, l), w))| {
+            let w1: [f64; 4] = std::array::from_fn(|k| w[k]);
+            let w2: [f64; 4] = std::array::from_fn(|k| w[4 + k]);
+            let (y1, y2) = kernels::edge_project(
+                &w1,
+                &w2,
+                &[0.0; 4],
+                &[0.0; 4],
+                &problem.slot_dir[2 * i],
+                &problem.slot_dir[2 * i + 1],
+                mu,
+            );
+            y[0] = y1;
+            y[1] = y2;
+            l[0] = std::array::from_fn(|k| mu * (y1[k] - w1[k]));
+            l[1] = std::array::from_fn(|k| mu * (y2[k] - w2[k]));
+        });
+}
+
+/// `Σ_t ‖Y⁺_t − A⁺_ft‖² + ‖Y⁺_t − Y_t‖²`, with `Y` the last iteration's input.
+fn combined_residual(problem: &AdmmProblem, state: &AdmmState, y_in: &[[f64; 4]]) -> f64 {
+    let ns = problem.n_slots();
+    (0..ns.div_ceil(SUM_CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let mut r = 0.0;
+            for s in c * SUM_CHUNK..((c + 1) * SUM_CHUNK).min(ns) {
+                let a = &state.a[problem.slot_face[s] as usize];
+                let y = &state.y[s];
+                for i in 0..4 {
+                    r += (y[i] - a[i]).powi(2) + (y[i] - y_in[s][i]).powi(2);
+                }
+            }
+            r
+        })
+        .collect::<Vec<_>>()
+        .iter()
+        .sum()
 }
 
 impl<'p> CpuExecutor<'p> {
@@ -32,6 +141,95 @@ impl<'p> CpuExecutor<'p> {
             energy,
             newton_iters,
             state,
+            accel: None,
+        }
+    }
+
+    /// Selects the acceleration (`depth` = Anderson history length, one Anderson step every
+    /// `every` iterations).
+    pub fn with_accel(mut self, accel: Accel, depth: usize, every: usize) -> CpuExecutor<'p> {
+        self.accel = match accel {
+            Accel::None => None,
+            Accel::Anderson => Some(Accelerator {
+                aa: Anderson::new(depth),
+                fallback: self.state.clone(),
+                fallback_a_prev: Vec::new(),
+                last_residual: f64::INFINITY,
+                restart: true,
+                mu: f64::NAN,
+                block: 0,
+                every: every.max(1),
+                y_last: Vec::new(),
+                a_in: Vec::new(),
+                accepted: 0,
+                rejected: 0,
+                x: Vec::new(),
+                g: Vec::new(),
+            }),
+        };
+        self
+    }
+
+    /// `k ≥ 1` ADMM iterations followed by one Anderson step on their composite map `G^k`,
+    /// with the safeguard of [`Accelerator`]. Extrapolating every `k` iterations instead of
+    /// every one divides the cost of the acceleration (several passes over the whole edge state)
+    /// by `k`.
+    fn accelerated_block(&mut self, mu: f64, k: usize) {
+        let Some(acc) = self.accel.as_mut() else {
+            for _ in 0..k {
+                iteration(
+                    self.problem,
+                    &mut self.state,
+                    self.energy,
+                    self.newton_iters,
+                    mu,
+                );
+            }
+            return;
+        };
+        if acc.mu != mu || acc.block != k {
+            // A new μ (or block length) is a new fixed-point map: the stored differences
+            // describe the old one.
+            acc.reset();
+            acc.mu = mu;
+            acc.block = k;
+        }
+        pack_state(&self.state, mu, &mut acc.x);
+        for _ in 1..k {
+            iteration(
+                self.problem,
+                &mut self.state,
+                self.energy,
+                self.newton_iters,
+                mu,
+            );
+        }
+        acc.y_last.clone_from(&self.state.y);
+        acc.a_in.clone_from(&self.state.a);
+        iteration(
+            self.problem,
+            &mut self.state,
+            self.energy,
+            self.newton_iters,
+            mu,
+        );
+        let r = combined_residual(self.problem, &self.state, &acc.y_last);
+        if acc.restart || r < acc.last_residual {
+            acc.accepted += k;
+            acc.restart = false;
+            acc.last_residual = r;
+            acc.fallback.clone_from(&self.state);
+            std::mem::swap(&mut acc.fallback_a_prev, &mut acc.a_in);
+            pack_state(&self.state, mu, &mut acc.g);
+            acc.aa.step(&acc.x, &mut acc.g);
+            unpack_state(self.problem, &acc.g, mu, &mut self.state);
+        } else {
+            // The accelerated input made things worse: continue from the plain output of the
+            // last accepted block, with a fresh history.
+            acc.rejected += k;
+            self.state.clone_from(&acc.fallback);
+            acc.aa.reset();
+            acc.restart = true;
         }
     }
 }
@@ -171,7 +369,14 @@ impl Executor for CpuExecutor<'_> {
 
     fn upload(&mut self, state: &AdmmState) -> crate::Result<()> {
         self.state = state.clone();
+        if let Some(acc) = self.accel.as_mut() {
+            acc.reset();
+        }
         Ok(())
+    }
+
+    fn accel_stats(&self) -> Option<(usize, usize)> {
+        self.accel.as_ref().map(|a| (a.accepted, a.rejected))
     }
 
     fn download(&mut self) -> crate::Result<AdmmState> {
@@ -182,18 +387,71 @@ impl Executor for CpuExecutor<'_> {
         // The `A` before the last iteration, for the dual residual (n ≥ 1 so it is always set).
         let n = n.max(1);
         let mut a_prev = Vec::new();
-        for k in 0..n {
-            if k + 1 == n {
+        let every = self.accel.as_ref().map_or(1, |a| a.every);
+        let mut done = 0;
+        while done < n {
+            let k = every.min(n - done);
+            if self.accel.is_none() && done + 1 == n {
                 a_prev.clone_from(&self.state.a);
             }
-            iteration(
-                self.problem,
-                &mut self.state,
-                self.energy,
-                self.newton_iters,
-                mu,
-            );
+            self.accelerated_block(mu, k);
+            done += k;
         }
-        Ok(residuals(self.problem, &self.state, &a_prev, self.energy))
+        Ok(match &self.accel {
+            // The first iteration after a reset is always accepted, so `fallback` is set.
+            Some(acc) => residuals(
+                self.problem,
+                &acc.fallback,
+                &acc.fallback_a_prev,
+                self.energy,
+            ),
+            None => residuals(self.problem, &self.state, &a_prev, self.energy),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh;
+    use crate::pipeline::{initial_map, normalize_area, InitMethod};
+
+    /// After one iteration the edge state is consistent (`Y` in the consensus set, `Λ` in its
+    /// complement), so the reduced state `w` determines it exactly: unpacking a packed state
+    /// gives it back, which is what lets Anderson work on half the data.
+    #[test]
+    fn reduced_edge_state_round_trips_after_an_iteration() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/camel_open.obj");
+        let (m, t, _) = mesh::load(&path, &mesh::ValidateOptions::default()).expect("test mesh");
+        let frames = mesh::frames::compute(&m);
+        let p = AdmmProblem::new(&m, &t, &frames);
+        let mut uv = initial_map(&m, &t, InitMethod::Lscm).expect("lscm");
+        normalize_area(&m, &mut uv, frames.area.iter().sum());
+        let mut s = AdmmState::from_uv(&p, &m.faces, &uv);
+        let mu = 300.0 / p.n_faces() as f64;
+        for _ in 0..3 {
+            iteration(&p, &mut s, Energy::SymmetricDirichlet, 1, mu);
+        }
+        let mut w = Vec::new();
+        pack_state(&s, mu, &mut w);
+        let mut back = s.clone();
+        back.y.iter_mut().for_each(|y| *y = [9.0; 4]);
+        back.lambda.iter_mut().for_each(|l| *l = [-9.0; 4]);
+        unpack_state(&p, &w, mu, &mut back);
+        let scale = s
+            .lambda
+            .iter()
+            .flatten()
+            .fold(1.0f64, |m, x| m.max(x.abs()));
+        for (a, b) in
+            s.y.iter()
+                .zip(&back.y)
+                .chain(s.lambda.iter().zip(&back.lambda))
+        {
+            for i in 0..4 {
+                assert!((a[i] - b[i]).abs() <= 1e-9 * scale, "{a:?} vs {b:?}");
+            }
+        }
     }
 }

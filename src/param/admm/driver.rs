@@ -17,6 +17,17 @@ pub enum Backend {
     Vulkan,
 }
 
+/// Acceleration of the ADMM fixed-point iteration.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Accel {
+    /// Plain ADMM.
+    #[default]
+    None,
+    /// Anderson acceleration of the edge state with a residual safeguard (CPU backend only).
+    Anderson,
+}
+
 /// Residual sums measured after the last iteration of a batch (twin of `residual.comp`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Residuals {
@@ -42,6 +53,10 @@ pub trait Executor {
     fn download(&mut self) -> crate::Result<AdmmState>;
     /// Runs `n ≥ 1` iterations with penalty `mu`; residuals of the last one.
     fn iterate(&mut self, n: usize, mu: f64) -> crate::Result<Residuals>;
+    /// Iterations in accepted and rejected accelerated blocks so far, when accelerating.
+    fn accel_stats(&self) -> Option<(usize, usize)> {
+        None
+    }
 }
 
 /// Solver settings. `Default` gives the documented defaults for MIPS; use
@@ -76,6 +91,12 @@ pub struct AdmmOptions {
     pub balance: bool,
     /// Set to stop early (Ctrl-C); the best flip-free map so far is returned.
     pub stop: Option<Arc<AtomicBool>>,
+    /// Acceleration (every iteration counts, rejected accelerated ones included).
+    pub accel: Accel,
+    /// Anderson history length `m`.
+    pub aa_depth: usize,
+    /// ADMM iterations per Anderson step (the acceleration extrapolates the composite map).
+    pub aa_every: usize,
 }
 
 impl AdmmOptions {
@@ -96,6 +117,9 @@ impl AdmmOptions {
             mu_growth_max: 64.0,
             balance: true,
             stop: None,
+            accel: Accel::None,
+            aa_depth: 6,
+            aa_every: 1,
         }
     }
 
@@ -127,6 +151,12 @@ pub struct History {
     /// Set when a recovery happened at this check: flips of the recovered map and its energy.
     pub recovered_flips: Option<usize>,
     pub recovered_energy: Option<f64>,
+    /// Iterations in accepted and in rejected accelerated blocks so far (`None` without
+    /// acceleration).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub accel_accepted: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub accel_rejected: Option<usize>,
 }
 
 /// What [`solve`] returns.
@@ -249,6 +279,8 @@ pub fn solve(
             energy_change,
             recovered_flips: None,
             recovered_energy: None,
+            accel_accepted: exec.accel_stats().map(|s| s.0),
+            accel_rejected: exec.accel_stats().map(|s| s.1),
         };
 
         let small =

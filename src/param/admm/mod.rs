@@ -18,13 +18,14 @@
 //! Weights are `w_f = area_f / total area`, so `μ` is quoted as `μ_rel = μ · #faces` (with
 //! normalised weights the iterates depend on μ only through that product).
 
+pub mod anderson;
 pub mod cpu;
 pub mod driver;
 pub mod kernels;
 pub mod layout;
 pub mod vulkan;
 
-pub use driver::{solve, AdmmOptions, AdmmResult, Backend, History};
+pub use driver::{solve, Accel, AdmmOptions, AdmmResult, Backend, History};
 
 use crate::mesh::{FaceFrames, Topology, TriMesh, NO_FACE};
 
