@@ -88,6 +88,11 @@ pub struct ApproxOptions {
     pub corner_amplification: f64,
     /// Rounds of "split the regions that still fold, planarize again", while regions < K.
     pub max_split_passes: usize,
+    /// Regions split per pass (0 = every folding region the budget allows). Splitting few
+    /// regions per pass leaves budget for later passes, where a region that still folds after
+    /// its first split can be split again instead of the budget going to regions that a
+    /// single split does not fix.
+    pub split_per_pass: usize,
     /// Rounds of "merge the regions that still fold, planarize again".
     pub max_merge_passes: usize,
     pub boundary: BoundaryL0Options,
@@ -102,7 +107,8 @@ impl ApproxOptions {
             normals: NormalL0Options::default(),
             vertices: VertexUpdateOptions::default(),
             max_merge_passes: 0,
-            max_split_passes: 2,
+            max_split_passes: 4,
+            split_per_pass: 1,
             corner_reach_rel: 0.04,
             corner_amplification: 8.0,
             adapt_angle: true,
@@ -388,13 +394,12 @@ pub fn approximate(
         if split_passes < opts.max_split_passes && budget > 0 {
             split_passes += 1;
             let t = Instant::now();
-            let mut per_region = vec![0usize; n_clusters];
-            for &f in &bad {
-                per_region[face_cluster[f] as usize] += 1;
-            }
-            bad_regions.sort_by_key(|&c| std::cmp::Reverse(per_region[c as usize]));
+            let per_pass = match opts.split_per_pass {
+                0 => budget,
+                p => p.min(budget),
+            };
             let mut next = n_clusters as u32;
-            for &c in bad_regions.iter().take(budget) {
+            for c in split_candidates(&bad, &face_cluster, n_clusters, per_pass) {
                 if lloyd::split_region(topo, &n0, &a0, &mut face_cluster, c, next, 10) {
                     regions_split += 1;
                     next += 1;
@@ -540,6 +545,29 @@ fn renumber(labels: &mut [u32]) -> usize {
     map.len()
 }
 
+/// The regions to split in one pass: those holding most bad faces first (ties by region id,
+/// so runs are reproducible), at most `limit` of them. Few per pass keeps budget for a second
+/// split of a region that still folds after its first one.
+fn split_candidates(
+    bad: &[usize],
+    face_cluster: &[u32],
+    n_clusters: usize,
+    limit: usize,
+) -> Vec<u32> {
+    let mut per_region = vec![0usize; n_clusters];
+    for &f in bad {
+        if let Some(n) = per_region.get_mut(face_cluster[f] as usize) {
+            *n += 1;
+        }
+    }
+    let mut regions: Vec<u32> = (0..n_clusters as u32)
+        .filter(|&c| per_region[c as usize] > 0)
+        .collect();
+    regions.sort_by_key(|&c| std::cmp::Reverse(per_region[c as usize]));
+    regions.truncate(limit);
+    regions
+}
+
 /// OBJ text of the input connectivity on new positions (same `v` and `f` order as the input).
 pub fn mesh_obj(positions: &[V3], faces: &[[u32; 3]]) -> String {
     use std::fmt::Write;
@@ -551,4 +579,20 @@ pub fn mesh_obj(positions: &[V3], faces: &[[u32; 3]]) -> String {
         let _ = writeln!(s, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1);
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::split_candidates;
+
+    #[test]
+    fn split_candidates_rank_by_bad_faces_and_respect_the_limit() {
+        // Regions 0..4; bad faces: region 2 ×3, region 0 ×1, region 3 ×1, region 1 none.
+        let face_cluster = [0, 1, 2, 2, 2, 3, 1, 0];
+        let bad = [0, 2, 3, 4, 5];
+        assert_eq!(split_candidates(&bad, &face_cluster, 4, 10), vec![2, 0, 3]);
+        assert_eq!(split_candidates(&bad, &face_cluster, 4, 1), vec![2]);
+        assert!(split_candidates(&bad, &face_cluster, 4, 0).is_empty());
+        assert!(split_candidates(&[], &face_cluster, 4, 5).is_empty());
+    }
 }
