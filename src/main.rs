@@ -389,6 +389,13 @@ struct ParamArgs {
     /// ADMM iterations per Anderson step (with `--accel anderson`).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
     aa_every: u64,
+    /// Plain ADMM iterations before Anderson acceleration starts (with `--accel anderson`).
+    #[arg(long, default_value_t = 100)]
+    aa_start: u64,
+    /// While accelerating, lower μ (residual balancing) only once the relative energy change
+    /// between checks is under this.
+    #[arg(long, default_value_t = 1e-4)]
+    aa_balance_energy: f64,
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -871,6 +878,8 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     };
     admm.aa_depth = args.aa_depth as usize;
     admm.aa_every = args.aa_every as usize;
+    admm.aa_start = args.aa_start as usize;
+    admm.aa_balance_energy = args.aa_balance_energy;
     let admm_accel_cpu_only = admm.accel != foldfree::param::admm::Accel::None;
     admm.stop = Some(stop);
     let mut job = ParamJob::new(&args.input, &args.output);
