@@ -130,8 +130,15 @@ impl AdmmOptions {
             accel: Accel::None,
             aa_depth: 6,
             aa_every: 1,
-            aa_start: 100,
-            aa_balance_energy: 1e-4,
+            // Plain ADMM from LSCM converges in 75–275 iterations on most MIPS runs; on SD
+            // runs starting late cost lion_mask 3225 instead of 1475 (BENCHMARKS.md).
+            aa_start: match energy {
+                Energy::Mips => 100,
+                Energy::SymmetricDirichlet => 0,
+            },
+            // Off: the gate helps camelhead SD (5400 → 3150 iterations) but costs camel,
+            // lion and face SD more (BENCHMARKS.md, Anderson round 2).
+            aa_balance_energy: f64::INFINITY,
         }
     }
 
@@ -364,9 +371,9 @@ pub fn solve(
         {
             // Residual balancing (Boyd et al. 2011, §3.4.1) in its safe half: the consensus is
             // already tight and the dual residual dominates, so a smaller μ lets the energy move.
-            // While accelerating the extrapolated consensus tightens long before the energy has
-            // settled (camelhead SD: μ halved three times, each change dropping the Anderson
-            // history), so there it also waits for the energy change.
+            // While accelerating, the extrapolated consensus can tighten long before the energy
+            // has settled (camelhead SD: μ halved three times, each change dropping the Anderson
+            // history); `aa_balance_energy` can make balancing wait for the energy change too.
             mu_rel /= 2.0;
             best_primal = primal;
             checks_since_best = 0;
