@@ -438,6 +438,14 @@ struct ParamArgs {
     /// ADMM iterations per Anderson step (with `--accel anderson`).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
     aa_every: u64,
+    /// Plain ADMM iterations before Anderson acceleration starts (with `--accel anderson`;
+    /// default 100 for MIPS, 0 for SD).
+    #[arg(long)]
+    aa_start: Option<u64>,
+    /// While accelerating, lower μ (residual balancing) only once the relative energy change
+    /// between checks is under this (default: no such condition).
+    #[arg(long)]
+    aa_balance_energy: Option<f64>,
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -924,6 +932,12 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     };
     admm.aa_depth = args.aa_depth as usize;
     admm.aa_every = args.aa_every as usize;
+    if let Some(n) = args.aa_start {
+        admm.aa_start = n as usize;
+    }
+    if let Some(t) = args.aa_balance_energy {
+        admm.aa_balance_energy = t;
+    }
     let admm_accel_cpu_only = admm.accel != foldfree::param::admm::Accel::None;
     admm.stop = Some(stop);
     let mut job = ParamJob::new(&args.input, &args.output);

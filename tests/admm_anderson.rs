@@ -94,6 +94,7 @@ fn anderson_under_an_unstable_penalty_still_returns_a_flip_free_map() {
         o.adaptive_mu = false;
         o.max_iters = 150;
         o.accel = Accel::Anderson;
+        o.aa_start = 0;
         let mut exec = CpuExecutor::new(&p, energy, 1).with_accel(o.accel, o.aa_depth, o.aa_every);
         let r = admm::solve(
             &p,
@@ -115,6 +116,33 @@ fn anderson_under_an_unstable_penalty_still_returns_a_flip_free_map() {
                 .map(|(a, b)| a + b),
             Some(150)
         );
+    }
+}
+
+/// Acceleration starts after `aa_start` plain iterations (short runs pay nothing for it): the
+/// accelerated iterations counted are exactly the ones after it, and a run that converges
+/// before it counts none.
+#[test]
+fn anderson_starts_after_the_plain_iterations_asked_for() {
+    let (m, t, p) = load("camel_open.obj");
+    let lscm = start(&m, &t, InitMethod::Lscm);
+    let energy = Energy::SymmetricDirichlet;
+    for (start_at, max_iters, counted) in [(50, 100, 50), (1000, 50, 0)] {
+        let mut o = AdmmOptions::for_energy(energy);
+        o.max_iters = max_iters;
+        o.accel = Accel::Anderson;
+        o.aa_start = start_at;
+        let mut exec = CpuExecutor::new(&p, energy, 1).with_accel(o.accel, o.aa_depth, o.aa_every);
+        let r = admm::solve(&p, &m.faces, &lscm, None, &o, &mut exec, &mut |_| {}).expect("solve");
+        let last = r.history.last().expect("at least one check");
+        assert_eq!(
+            last.accel_accepted
+                .zip(last.accel_rejected)
+                .map(|(a, b)| a + b),
+            Some(counted),
+            "aa_start {start_at}"
+        );
+        assert_eq!(r.flips, 0);
     }
 }
 

@@ -74,10 +74,18 @@ impl Anderson {
         self.has_prev = false;
     }
 
+    /// The last plain (unaccelerated) output `G(x)` given to [`Anderson::step`]: it is kept for
+    /// the next difference anyway, so the caller's safeguard can fall back to it without a copy
+    /// of its own. Empty before the first step.
+    pub fn last_plain(&self) -> &[f64] {
+        &self.prev_g
+    }
+
     /// Given the input `x` of one ADMM iteration and its output `g = G(x)`, writes the
     /// accelerated next input into `g` (in place). With no stored difference yet the plain step
-    /// `G(x)` is left unchanged. Three passes over the data: differences, all Gram and
-    /// right-hand-side dot products at once, the combination.
+    /// `G(x)` is left unchanged. Two passes over the data: the differences fused with all Gram
+    /// and right-hand-side dot products (chunk by chunk, while the chunk is in cache), then the
+    /// combination.
     pub fn step(&mut self, x: &[f64], g: &mut [f64]) {
         let n = x.len();
         debug_assert_eq!(g.len(), n);
@@ -87,31 +95,7 @@ impl Anderson {
         let mut prev_g = std::mem::take(&mut self.prev_g);
         prev_f.resize(n, 0.0);
         prev_g.resize(n, 0.0);
-        if with_prev {
-            let mut df = std::mem::take(&mut self.df[slot]);
-            let mut dg = std::mem::take(&mut self.dg[slot]);
-            df.resize(n, 0.0);
-            dg.resize(n, 0.0);
-            prev_f
-                .par_chunks_mut(DOT_CHUNK)
-                .zip(prev_g.par_chunks_mut(DOT_CHUNK))
-                .zip(df.par_chunks_mut(DOT_CHUNK))
-                .zip(dg.par_chunks_mut(DOT_CHUNK))
-                .zip(x.par_chunks(DOT_CHUNK).zip(g.par_chunks(DOT_CHUNK)))
-                .for_each(|((((pf, pg), df), dg), (x, g))| {
-                    for i in 0..x.len() {
-                        let f = g[i] - x[i];
-                        df[i] = f - pf[i];
-                        dg[i] = g[i] - pg[i];
-                        pf[i] = f;
-                        pg[i] = g[i];
-                    }
-                });
-            self.df[slot] = df;
-            self.dg[slot] = dg;
-            self.head = (self.head + 1) % self.depth;
-            self.count = (self.count + 1).min(self.depth);
-        } else {
+        if !with_prev {
             prev_f
                 .par_chunks_mut(DOT_CHUNK)
                 .zip(prev_g.par_chunks_mut(DOT_CHUNK))
@@ -122,31 +106,44 @@ impl Anderson {
                         pg[i] = g[i];
                     }
                 });
-        }
-        self.prev_f = prev_f;
-        self.prev_g = prev_g;
-        self.has_prev = true;
-        if !with_prev {
+            self.prev_f = prev_f;
+            self.prev_g = prev_g;
+            self.has_prev = true;
             return;
         }
-        // New row/column of the Gram matrix (the other entries are still valid) and the
-        // right-hand side Δf_j · f, in one pass: [gram row (m) | rhs (m)].
+        let mut new_df = std::mem::take(&mut self.df[slot]);
+        let mut new_dg = std::mem::take(&mut self.dg[slot]);
+        new_df.resize(n, 0.0);
+        new_dg.resize(n, 0.0);
+        self.head = (self.head + 1) % self.depth;
+        self.count = (self.count + 1).min(self.depth);
         let m = self.count;
-        let df = &self.df[..m];
-        let f = &self.prev_f;
-        let sums = (0..n.div_ceil(DOT_CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let r = c * DOT_CHUNK..((c + 1) * DOT_CHUNK).min(n);
-                let new = &df[slot][r.clone()];
-                let fc = &f[r.clone()];
+        // Per chunk: the new differences, then [gram row (m) | rhs (m)] against the stored
+        // columns (the slot being refilled is read from the new chunk) and f = g − x.
+        let cols = &self.df[..m];
+        let sums = prev_f
+            .par_chunks_mut(DOT_CHUNK)
+            .zip(prev_g.par_chunks_mut(DOT_CHUNK))
+            .zip(new_df.par_chunks_mut(DOT_CHUNK))
+            .zip(new_dg.par_chunks_mut(DOT_CHUNK))
+            .zip(x.par_chunks(DOT_CHUNK).zip(g.par_chunks(DOT_CHUNK)))
+            .enumerate()
+            .map(|(c, ((((pf, pg), df), dg), (x, g)))| {
+                for i in 0..x.len() {
+                    let f = g[i] - x[i];
+                    df[i] = f - pf[i];
+                    dg[i] = g[i] - pg[i];
+                    pf[i] = f;
+                    pg[i] = g[i];
+                }
+                let o = c * DOT_CHUNK;
                 let mut acc = vec![0.0; 2 * m];
-                for (j, col) in df.iter().enumerate() {
-                    let col = &col[r.clone()];
+                for (j, col) in cols.iter().enumerate() {
+                    let col: &[f64] = if j == slot { df } else { &col[o..o + x.len()] };
                     let (mut gj, mut rj) = (0.0, 0.0);
                     for i in 0..col.len() {
-                        gj += new[i] * col[i];
-                        rj += col[i] * fc[i];
+                        gj += df[i] * col[i];
+                        rj += col[i] * pf[i];
                     }
                     acc[j] = gj;
                     acc[m + j] = rj;
@@ -161,6 +158,10 @@ impl Anderson {
                 }
                 a
             });
+        self.df[slot] = new_df;
+        self.dg[slot] = new_dg;
+        self.prev_f = prev_f;
+        self.prev_g = prev_g;
         for j in 0..m {
             self.gram[slot * self.depth + j] = sums[j];
             self.gram[j * self.depth + slot] = sums[j];

@@ -28,10 +28,12 @@ pub struct CpuExecutor<'p> {
 /// dropped. So the worst case is plain ADMM plus one wasted iteration per rejection.
 struct Accelerator {
     aa: Anderson,
-    /// The last accepted plain ADMM output, to fall back to; the driver's residuals are
-    /// measured on it (the accelerated `(Y, Λ)` is an extrapolation, not an ADMM iterate).
-    fallback: AdmmState,
-    /// `A` before the iteration that produced `fallback` (for the dual residual).
+    /// `A` of the last accepted plain ADMM output, to fall back to; its edge state is
+    /// [`Anderson::last_plain`] (packed), so only `A` is copied. The driver's residuals are
+    /// measured on this output (the accelerated `(Y, Λ)` is an extrapolation, not an ADMM
+    /// iterate).
+    fallback_a: Vec<[f64; 4]>,
+    /// `A` before the iteration that produced the fallback (for the dual residual).
     fallback_a_prev: Vec<[f64; 4]>,
     /// Combined residual of the last accepted iteration.
     last_residual: f64,
@@ -51,6 +53,12 @@ struct Accelerator {
     /// iteration.
     x: Vec<f64>,
     g: Vec<f64>,
+    /// `x` already holds the packed current state (the accelerated output of the last block:
+    /// `pack(unpack(w)) = w`, so the next block need not pack again).
+    x_ready: bool,
+    /// Off: plain iterations (the driver switches acceleration on once plain ADMM has not
+    /// converged quickly; short runs then pay nothing for it).
+    active: bool,
 }
 
 impl Accelerator {
@@ -58,6 +66,7 @@ impl Accelerator {
         self.aa.reset();
         self.restart = true;
         self.last_residual = f64::INFINITY;
+        self.x_ready = false;
     }
 }
 
@@ -152,7 +161,7 @@ impl<'p> CpuExecutor<'p> {
             Accel::None => None,
             Accel::Anderson => Some(Accelerator {
                 aa: Anderson::new(depth),
-                fallback: self.state.clone(),
+                fallback_a: Vec::new(),
                 fallback_a_prev: Vec::new(),
                 last_residual: f64::INFINITY,
                 restart: true,
@@ -165,6 +174,8 @@ impl<'p> CpuExecutor<'p> {
                 rejected: 0,
                 x: Vec::new(),
                 g: Vec::new(),
+                x_ready: false,
+                active: true,
             }),
         };
         self
@@ -194,7 +205,9 @@ impl<'p> CpuExecutor<'p> {
             acc.mu = mu;
             acc.block = k;
         }
-        pack_state(&self.state, mu, &mut acc.x);
+        if !acc.x_ready {
+            pack_state(&self.state, mu, &mut acc.x);
+        }
         for _ in 1..k {
             iteration(
                 self.problem,
@@ -218,18 +231,25 @@ impl<'p> CpuExecutor<'p> {
             acc.accepted += k;
             acc.restart = false;
             acc.last_residual = r;
-            acc.fallback.clone_from(&self.state);
+            acc.fallback_a.clone_from(&self.state.a);
             std::mem::swap(&mut acc.fallback_a_prev, &mut acc.a_in);
             pack_state(&self.state, mu, &mut acc.g);
             acc.aa.step(&acc.x, &mut acc.g);
             unpack_state(self.problem, &acc.g, mu, &mut self.state);
+            std::mem::swap(&mut acc.x, &mut acc.g);
+            acc.x_ready = true;
         } else {
             // The accelerated input made things worse: continue from the plain output of the
-            // last accepted block, with a fresh history.
+            // last accepted block (same μ: a change of μ restarts, and a restart is accepted),
+            // with a fresh history.
             acc.rejected += k;
-            self.state.clone_from(&acc.fallback);
+            self.state.a.clone_from(&acc.fallback_a);
+            unpack_state(self.problem, acc.aa.last_plain(), mu, &mut self.state);
+            acc.x.clear();
+            acc.x.extend_from_slice(acc.aa.last_plain());
             acc.aa.reset();
             acc.restart = true;
+            acc.x_ready = true;
         }
     }
 }
@@ -383,30 +403,59 @@ impl Executor for CpuExecutor<'_> {
         Ok(self.state.clone())
     }
 
+    fn set_accel_active(&mut self, on: bool) {
+        if let Some(acc) = self.accel.as_mut() {
+            if acc.active != on {
+                acc.reset();
+                acc.active = on;
+            }
+        }
+    }
+
     fn iterate(&mut self, n: usize, mu: f64) -> crate::Result<Residuals> {
-        // The `A` before the last iteration, for the dual residual (n ≥ 1 so it is always set).
         let n = n.max(1);
-        let mut a_prev = Vec::new();
+        if !self.accel.as_ref().is_some_and(|a| a.active) {
+            // The `A` before the last iteration, for the dual residual.
+            let mut a_prev = Vec::new();
+            for i in 0..n {
+                if i + 1 == n {
+                    a_prev.clone_from(&self.state.a);
+                }
+                iteration(
+                    self.problem,
+                    &mut self.state,
+                    self.energy,
+                    self.newton_iters,
+                    mu,
+                );
+            }
+            return Ok(residuals(self.problem, &self.state, &a_prev, self.energy));
+        }
         let every = self.accel.as_ref().map_or(1, |a| a.every);
         let mut done = 0;
         while done < n {
             let k = every.min(n - done);
-            if self.accel.is_none() && done + 1 == n {
-                a_prev.clone_from(&self.state.a);
-            }
             self.accelerated_block(mu, k);
             done += k;
         }
-        Ok(match &self.accel {
-            // The first iteration after a reset is always accepted, so `fallback` is set.
-            Some(acc) => residuals(
-                self.problem,
-                &acc.fallback,
-                &acc.fallback_a_prev,
-                self.energy,
-            ),
-            None => residuals(self.problem, &self.state, &a_prev, self.energy),
-        })
+        // The first block after a reset is always accepted, so the fallback is set: rebuild
+        // its edge state from the packed plain output (once per batch).
+        let acc = self
+            .accel
+            .as_ref()
+            .expect("checked active above, and blocks never remove the accelerator");
+        let mut plain = AdmmState {
+            a: acc.fallback_a.clone(),
+            y: vec![[0.0; 4]; self.state.y.len()],
+            lambda: vec![[0.0; 4]; self.state.lambda.len()],
+        };
+        unpack_state(self.problem, acc.aa.last_plain(), mu, &mut plain);
+        Ok(residuals(
+            self.problem,
+            &plain,
+            &acc.fallback_a_prev,
+            self.energy,
+        ))
     }
 }
 

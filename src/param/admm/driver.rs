@@ -53,10 +53,13 @@ pub trait Executor {
     fn download(&mut self) -> crate::Result<AdmmState>;
     /// Runs `n ≥ 1` iterations with penalty `mu`; residuals of the last one.
     fn iterate(&mut self, n: usize, mu: f64) -> crate::Result<Residuals>;
-    /// Iterations in accepted and rejected accelerated blocks so far, when accelerating.
+    /// Iterations in accepted and rejected accelerated blocks so far (from the start of the
+    /// acceleration), when accelerating.
     fn accel_stats(&self) -> Option<(usize, usize)> {
         None
     }
+    /// Switches the acceleration on or off (no-op without one).
+    fn set_accel_active(&mut self, _on: bool) {}
 }
 
 /// Solver settings. `Default` gives the documented defaults for MIPS; use
@@ -97,6 +100,13 @@ pub struct AdmmOptions {
     pub aa_depth: usize,
     /// ADMM iterations per Anderson step (the acceleration extrapolates the composite map).
     pub aa_every: usize,
+    /// Plain iterations before acceleration starts: runs that converge within them (MIPS from
+    /// LSCM: 75–275 iterations) pay nothing for it, and the history then starts near the
+    /// slowly converging regime it is meant for.
+    pub aa_start: usize,
+    /// While accelerating, residual balancing (lowering μ) also waits for the relative energy
+    /// change between checks to fall under this (∞: no extra condition).
+    pub aa_balance_energy: f64,
 }
 
 impl AdmmOptions {
@@ -120,6 +130,15 @@ impl AdmmOptions {
             accel: Accel::None,
             aa_depth: 6,
             aa_every: 1,
+            // Plain ADMM from LSCM converges in 75–275 iterations on most MIPS runs; on SD
+            // runs starting late cost lion_mask 3225 instead of 1475 (BENCHMARKS.md).
+            aa_start: match energy {
+                Energy::Mips => 100,
+                Energy::SymmetricDirichlet => 0,
+            },
+            // Off: the gate helps camelhead SD (5400 → 3150 iterations) but costs camel,
+            // lion and face SD more (BENCHMARKS.md, Anderson round 2).
+            aa_balance_energy: f64::INFINITY,
         }
     }
 
@@ -219,6 +238,8 @@ pub fn solve(
 
     let state = AdmmState::from_uv(problem, faces, init_uv);
     exec.upload(&state)?;
+    let accelerating = opts.accel != Accel::None;
+    exec.set_accel_active(accelerating && opts.aa_start == 0);
 
     let (e0, flips0) = map_energy(problem, faces, init_uv, opts.energy);
     let mut best_uv = init_uv.to_vec();
@@ -256,6 +277,9 @@ pub fn solve(
         }
         let batch = opts.check_every.max(1).min(opts.max_iters - it);
         let mu = mu_rel / nf;
+        if accelerating && it >= opts.aa_start {
+            exec.set_accel_active(true);
+        }
         let r = exec.iterate(batch, mu)?;
         it += batch;
         since_resync += batch;
@@ -342,10 +366,14 @@ pub fn solve(
             && primal < opts.tol_primal
             && dual > 10.0 * primal
             && checks_since_change >= opts.stall_checks
+            && (!accelerating || energy_change < opts.aa_balance_energy)
             && mu_rel / 2.0 >= opts.initial_mu_rel() / opts.mu_growth_max
         {
             // Residual balancing (Boyd et al. 2011, §3.4.1) in its safe half: the consensus is
             // already tight and the dual residual dominates, so a smaller μ lets the energy move.
+            // While accelerating, the extrapolated consensus can tighten long before the energy
+            // has settled (camelhead SD: μ halved three times, each change dropping the Anderson
+            // history); `aa_balance_energy` can make balancing wait for the energy change too.
             mu_rel /= 2.0;
             best_primal = primal;
             checks_since_best = 0;
