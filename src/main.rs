@@ -419,7 +419,7 @@ struct ParamArgs {
     /// Relative energy change tolerance between checks (met at 3 consecutive checks).
     #[arg(long)]
     tol_energy: Option<f64>,
-    /// Checks without progress of the primal residual before μ is doubled.
+    /// Checks without progress of the primal residual before μ is doubled (default 8 MIPS, 16 SD).
     #[arg(long)]
     stall_checks: Option<usize>,
     /// No residual balancing (by default μ is halved when the dual residual dominates a tight
