@@ -1,0 +1,166 @@
+//! The ADMM driver's decisions (stop test, μ adaptation) on scripted residuals: an executor that
+//! runs no iteration but reports residual sums from a script, so each rule is exercised exactly
+//! and on both sides of its threshold.
+
+use std::path::Path;
+
+use foldfree::mesh;
+use foldfree::param::admm::driver::{Executor, Residuals};
+use foldfree::param::admm::{self, AdmmOptions, AdmmProblem, AdmmState};
+use foldfree::param::Energy;
+use foldfree::pipeline::{initial_map, normalize_area, InitMethod};
+
+/// Reports `script(check index, μ·F)` = (relative primal, relative dual, energy) at every check
+/// and keeps the uploaded state (the flip-free start map) for the driver's recoveries.
+struct Scripted<F: FnMut(usize, f64) -> (f64, f64, f64)> {
+    script: F,
+    state: Option<AdmmState>,
+    nf: f64,
+    checks: usize,
+    /// μ·F passed to each batch.
+    mu_seen: Vec<f64>,
+}
+
+impl<F: FnMut(usize, f64) -> (f64, f64, f64)> Executor for Scripted<F> {
+    fn backend(&self) -> &'static str {
+        "scripted"
+    }
+    fn device(&self) -> String {
+        "script".into()
+    }
+    fn upload(&mut self, state: &AdmmState) -> foldfree::Result<()> {
+        self.state = Some(state.clone());
+        Ok(())
+    }
+    fn download(&mut self) -> foldfree::Result<AdmmState> {
+        Ok(self
+            .state
+            .clone()
+            .expect("the driver uploads before it downloads"))
+    }
+    fn iterate(&mut self, _n: usize, mu: f64) -> foldfree::Result<Residuals> {
+        let mu_rel = mu * self.nf;
+        self.mu_seen.push(mu_rel);
+        let (p, d, e) = (self.script)(self.checks, mu_rel);
+        self.checks += 1;
+        Ok(Residuals {
+            primal2: p * p,
+            dual2: d * d,
+            anorm2: 1.0,
+            energy: e,
+        })
+    }
+}
+
+fn grid() -> (mesh::TriMesh, AdmmProblem, Vec<[f64; 2]>) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/square_grid_10x10.obj");
+    let (m, t, _) = mesh::load(&path, &mesh::ValidateOptions::default()).expect("test mesh loads");
+    let frames = mesh::frames::compute(&m);
+    let p = AdmmProblem::new(&m, &t, &frames);
+    let mut uv = initial_map(&m, &t, InitMethod::Lscm).expect("start map");
+    let area: f64 = frames.area.iter().sum();
+    normalize_area(&m, &mut uv, area);
+    (m, p, uv)
+}
+
+fn run<F: FnMut(usize, f64) -> (f64, f64, f64)>(
+    opts: &AdmmOptions,
+    script: F,
+) -> (admm::AdmmResult, Vec<f64>) {
+    let (m, p, uv) = grid();
+    let mut exec = Scripted {
+        script,
+        state: None,
+        nf: p.n_faces() as f64,
+        checks: 0,
+        mu_seen: Vec::new(),
+    };
+    let r =
+        admm::solve(&p, &m.faces, &uv, None, opts, &mut exec, &mut |_| {}).expect("scripted run");
+    (r, exec.mu_seen)
+}
+
+/// Residuals far under tolerance and an energy that oscillates: one calm check now and then (a
+/// turning point) must not stop the run, three in a row must.
+#[test]
+fn one_calm_check_in_an_oscillation_does_not_stop() {
+    let mut opts = AdmmOptions::for_energy(Energy::SymmetricDirichlet);
+    opts.max_iters = 40 * opts.check_every;
+    opts.balance = false;
+    // Every third check repeats the previous energy (a turning point), the others swing by 1e-3.
+    let swing = |k: usize| {
+        if k % 3 == 2 {
+            (k - 1) as f64
+        } else {
+            k as f64
+        }
+    };
+    let (r, _) = run(&opts, |k, _| {
+        (1e-7, 1e-7, 1.0 + 1e-3 * (swing(k) * 2.1).sin())
+    });
+    assert!(!r.converged, "a lone calm check stopped the run");
+    assert_eq!(r.iterations, opts.max_iters);
+
+    // The same swing until check 20 (itself a turning point), then a settled energy: calm at
+    // checks 20, 21 and 22 (0-based), so the run stops after the 23rd check.
+    let (r, _) = run(&opts, |k, _| {
+        let k = k.min(20);
+        (1e-7, 1e-7, 1.0 + 1e-3 * (swing(k) * 2.1).sin())
+    });
+    assert!(r.converged);
+    assert_eq!(r.iterations, 23 * opts.check_every);
+}
+
+/// A μ at which the primal residual stalled above tolerance is a floor for residual balancing:
+/// without it the two rules alternate (halve on a tight consensus, raise on the stall below the
+/// stability threshold) until μ hits its bound.
+#[test]
+fn balancing_never_returns_below_a_mu_that_stalled() {
+    let mut opts = AdmmOptions::for_energy(Energy::Mips);
+    opts.mu_rel = Some(100.0);
+    opts.max_iters = 120 * opts.check_every;
+    let threshold = 200.0;
+    // Below the threshold: a stalled primal residual over tolerance. At or above it: a tight
+    // consensus with moving maps (dual over tolerance), which asks for a smaller μ.
+    let (r, mu_seen) = run(&opts, |k, mu_rel| {
+        let e = 1.0 + 1e-2 * (k as f64).sin();
+        if mu_rel < threshold {
+            (1e-3, 1e-3, e)
+        } else {
+            (1e-6, 1e-3, e)
+        }
+    });
+    assert!(!r.converged);
+    let first = mu_seen
+        .iter()
+        .position(|&m| m >= threshold)
+        .expect("the stall raised μ");
+    assert!(
+        mu_seen[first..].iter().all(|&m| m >= threshold),
+        "μ went back under the stalled value: {mu_seen:?}"
+    );
+    assert!(mu_seen.iter().all(|&m| m <= 2.0 * threshold));
+}
+
+/// Without any stall, balancing halves μ down to its bound (initial ÷ 64) while the consensus is
+/// tight and the maps move; the rule waits `stall_checks` checks between halvings.
+#[test]
+fn balancing_halves_mu_to_its_bound_when_the_consensus_is_tight() {
+    let mut opts = AdmmOptions::for_energy(Energy::Mips);
+    opts.mu_rel = Some(100.0);
+    opts.max_iters = 100 * opts.check_every;
+    let (_, mu_seen) = run(&opts, |k, _| (1e-6, 1e-3, 1.0 + 1e-2 * (k as f64).sin()));
+    let last = *mu_seen.last().expect("ran");
+    assert!((last - 100.0 / 64.0).abs() < 1e-9, "ended at {last}");
+    // Halvings are at least stall_checks checks apart.
+    let changes: Vec<usize> = (1..mu_seen.len())
+        .filter(|&i| mu_seen[i] != mu_seen[i - 1])
+        .collect();
+    assert_eq!(changes.len(), 6);
+    assert!(changes.windows(2).all(|w| w[1] - w[0] > opts.stall_checks));
+
+    // A consensus at 0.3 × tolerance is not tight enough (the f32 floor of the residual on a
+    // device is close to that): μ stays.
+    let (_, mu_seen) = run(&opts, |k, _| (3e-5, 1e-3, 1.0 + 1e-2 * (k as f64).sin()));
+    assert!(mu_seen.iter().all(|&m| m == 100.0));
+}
