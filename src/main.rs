@@ -416,7 +416,7 @@ struct ParamArgs {
     /// Relative dual residual tolerance ‖ΔA S‖/‖AS‖.
     #[arg(long)]
     tol_dual: Option<f64>,
-    /// Relative energy change tolerance between checks (met at 3 consecutive checks).
+    /// Relative energy change tolerance between checks (met at 2 consecutive checks).
     #[arg(long)]
     tol_energy: Option<f64>,
     /// Checks without progress of the primal residual before μ is doubled (default 8 MIPS, 16 SD).

@@ -101,14 +101,15 @@ fn one_calm_check_in_an_oscillation_does_not_stop() {
     assert!(!r.converged, "a lone calm check stopped the run");
     assert_eq!(r.iterations, opts.max_iters);
 
-    // The same swing until check 20 (itself a turning point), then a settled energy: calm at
-    // checks 20, 21 and 22 (0-based), so the run stops after the 23rd check.
+    // The same swing until check 20 (itself a turning point), then a settled energy: calm from
+    // check 20 (0-based) on, so the run stops after check 20 + energy_checks − 1.
+    assert!(opts.energy_checks >= 2, "one calm check must not be enough");
     let (r, _) = run(&opts, |k, _| {
         let k = k.min(20);
         (1e-7, 1e-7, 1.0 + 1e-3 * (swing(k) * 2.1).sin())
     });
     assert!(r.converged);
-    assert_eq!(r.iterations, 23 * opts.check_every);
+    assert_eq!(r.iterations, (20 + opts.energy_checks) * opts.check_every);
 }
 
 /// A μ at which the primal residual stalled above tolerance is a floor for residual balancing:
