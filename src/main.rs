@@ -371,6 +371,14 @@ enum AccelArg {
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
+enum RecoveryArg {
+    /// Least squares (Poisson, CG): spreads the consensus error over the mesh.
+    Ls,
+    /// The seed paper's breadth-first traversal: u(b) = u(a) + A_f (x_b − x_a).
+    Bfs,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
 enum BackendArg {
     /// Vulkan on a real GPU, else the CPU backend.
     Auto,
@@ -446,6 +454,9 @@ struct ParamArgs {
     /// between checks is under this (default: no such condition).
     #[arg(long)]
     aa_balance_energy: Option<f64>,
+    /// How per-vertex UVs are recovered from the ADMM per-face maps.
+    #[arg(long, value_enum, default_value = "ls")]
+    recovery: RecoveryArg,
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -871,11 +882,13 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         || args.tol_energy.is_some()
         || args.newton_iters.is_some()
         || !matches!(args.accel, AccelArg::None)
+        || matches!(args.recovery, RecoveryArg::Bfs)
         || matches!(args.backend, BackendArg::Vulkan);
     if solver == SolverChoice::Global && admm_only {
         return Err(foldfree::Error::Usage(
             "--solver global runs on the CPU with its own stopping rule: --backend vulkan, \
-             --mu, --max-iters, --resync, --tol-*, --newton-iters and --accel apply to ADMM only"
+             --mu, --max-iters, --resync, --tol-*, --newton-iters, --accel and --recovery apply \
+             to ADMM only"
                 .into(),
         ));
     }
@@ -938,6 +951,10 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     if let Some(t) = args.aa_balance_energy {
         admm.aa_balance_energy = t;
     }
+    admm.recovery = match args.recovery {
+        RecoveryArg::Ls => foldfree::param::recover::Recovery::LeastSquares,
+        RecoveryArg::Bfs => foldfree::param::recover::Recovery::BreadthFirst,
+    };
     let admm_accel_cpu_only = admm.accel != foldfree::param::admm::Accel::None;
     admm.stop = Some(stop);
     let mut job = ParamJob::new(&args.input, &args.output);

@@ -136,3 +136,67 @@ fn executor_batches_equal_single_iterations() {
     }
     assert_eq!(batched, s);
 }
+
+/// Breadth-first recovery of the Jacobians of a map gives back that map (up to the pinned first
+/// corner, which keeps its position), exactly where the per-face maps agree; least squares gives
+/// the same map. With the per-face maps perturbed, breadth-first accumulates the error along the
+/// traversal, least squares spreads it: its error stays smaller.
+#[test]
+fn breadth_first_recovery_reproduces_a_consistent_map() {
+    use foldfree::param::recover::{breadth_first, LeastSquaresRecovery};
+    let (m, t, p) = load("camel_open.obj");
+    let uv0 = start(&m, &t, InitMethod::Tutte(TutteWeights::Uniform));
+    let a: Vec<[f64; 4]> = (0..m.faces.len())
+        .map(|f| p.jacobian(&m.faces, &uv0, f))
+        .collect();
+    let max_err = |uv: &[[f64; 2]]| {
+        uv.iter()
+            .zip(&uv0)
+            .map(|(x, y)| (x[0] - y[0]).hypot(x[1] - y[1]))
+            .fold(0.0f64, f64::max)
+    };
+    // Start from a scrambled map: only the pinned corner's value may be used.
+    let scrambled: Vec<[f64; 2]> = uv0
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            if i == m.faces[0][0] as usize {
+                *x
+            } else {
+                [7.0, -3.0]
+            }
+        })
+        .collect();
+    let mut bfs = scrambled.clone();
+    breadth_first(&p, &m.faces, &a, &mut bfs);
+    assert!(
+        max_err(&bfs) < 1e-9,
+        "breadth-first error {}",
+        max_err(&bfs)
+    );
+    let ls = LeastSquaresRecovery::new(&p, &m.faces, uv0.len()).expect("recovery");
+    let mut lsq = scrambled.clone();
+    ls.recover(&a, &mut lsq).expect("recover");
+    assert!(
+        max_err(&lsq) < 1e-6,
+        "least-squares error {}",
+        max_err(&lsq)
+    );
+
+    // Deterministic perturbation of every per-face map by up to 1e-3.
+    let noisy: Vec<[f64; 4]> = a
+        .iter()
+        .enumerate()
+        .map(|(f, x)| std::array::from_fn(|i| x[i] + 1e-3 * ((f * 4 + i) as f64 * 0.7).sin()))
+        .collect();
+    let mut bfs = scrambled.clone();
+    breadth_first(&p, &m.faces, &noisy, &mut bfs);
+    let mut lsq = scrambled;
+    ls.recover(&noisy, &mut lsq).expect("recover");
+    assert!(
+        max_err(&lsq) < max_err(&bfs),
+        "least squares {} vs breadth-first {}",
+        max_err(&lsq),
+        max_err(&bfs)
+    );
+}

@@ -134,3 +134,68 @@ impl LeastSquaresRecovery {
         Ok(())
     }
 }
+
+/// How per-vertex UVs are recovered from the per-face maps.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Recovery {
+    /// [`LeastSquaresRecovery`]: the consensus error spread over the whole mesh.
+    #[default]
+    LeastSquares,
+    /// [`breadth_first`], the seed paper's: exact where the maps agree, but the consensus error
+    /// accumulates along the traversal, so it flips long after least squares is clean.
+    BreadthFirst,
+}
+
+/// Breadth-first recovery (Wu & Zhang 2020): starting at the first face's first corner, which
+/// keeps its position in `uv`, each face reached across an interior edge sets its remaining
+/// corner `b` from a known corner `a` as `u(b) = u(a) + A_f (x_b − x_a)`, with `x` the corners in
+/// the face's own frame. Every face is reached once (the mesh is a disk: the faces are
+/// edge-connected); vertices no face reaches keep their value in `uv`.
+pub fn breadth_first(
+    problem: &AdmmProblem,
+    faces: &[[u32; 3]],
+    a: &[[f64; 4]],
+    uv: &mut [[f64; 2]],
+) {
+    let nf = faces.len();
+    if nf == 0 {
+        return;
+    }
+    let mut known = vec![false; uv.len()];
+    let mut seen = vec![false; nf];
+    let mut queue = std::collections::VecDeque::new();
+    known[faces[0][0] as usize] = true;
+    seen[0] = true;
+    queue.push_back(0usize);
+    while let Some(f) = queue.pop_front() {
+        let face = faces[f];
+        let x = &problem.local[f];
+        let Some(i) = (0..3).find(|&i| known[face[i] as usize]) else {
+            continue; // unreachable: a face is queued only across an edge with known ends
+        };
+        let ua = uv[face[i] as usize];
+        for j in 0..3 {
+            let vb = face[j] as usize;
+            if known[vb] {
+                continue;
+            }
+            let d = [x[j][0] - x[i][0], x[j][1] - x[i][1]];
+            let m = &a[f];
+            uv[vb] = [
+                ua[0] + m[0] * d[0] + m[1] * d[1],
+                ua[1] + m[2] * d[0] + m[3] * d[1],
+            ];
+            known[vb] = true;
+        }
+        for &s in &problem.face_slots[f] {
+            if s == crate::param::admm::NO_SLOT {
+                continue;
+            }
+            let g = problem.slot_face[(s ^ 1) as usize] as usize;
+            if !seen[g] {
+                seen[g] = true;
+                queue.push_back(g);
+            }
+        }
+    }
+}

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use super::{AdmmProblem, AdmmState};
 use crate::param::energy::{self, Energy};
-use crate::param::recover::LeastSquaresRecovery;
+use crate::param::recover::{self, LeastSquaresRecovery, Recovery};
 
 /// Which executor runs the iteration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -119,6 +119,9 @@ pub struct AdmmOptions {
     /// While accelerating, residual balancing (lowering μ) also waits for the relative energy
     /// change between checks to fall under this (∞: no extra condition).
     pub aa_balance_energy: f64,
+    /// Per-vertex UVs from the per-face maps at each check that recovers (least squares by
+    /// default; the seed's breadth-first traversal as an option).
+    pub recovery: Recovery,
 }
 
 impl AdmmOptions {
@@ -174,6 +177,7 @@ impl AdmmOptions {
             // Off: the gate helps camelhead SD (5400 → 3150 iterations) but costs camel,
             // lion and face SD more (BENCHMARKS.md, Anderson round 2).
             aa_balance_energy: f64::INFINITY,
+            recovery: Recovery::LeastSquares,
         }
     }
 
@@ -269,7 +273,17 @@ pub fn solve(
 ) -> crate::Result<AdmmResult> {
     let nf = problem.n_faces().max(1) as f64;
     let mut mu_rel = opts.initial_mu_rel();
-    let recovery = LeastSquaresRecovery::new(problem, faces, init_uv.len())?;
+    let ls = match opts.recovery {
+        Recovery::LeastSquares => Some(LeastSquaresRecovery::new(problem, faces, init_uv.len())?),
+        Recovery::BreadthFirst => None,
+    };
+    let recover = |a: &[[f64; 4]], uv: &mut [[f64; 2]]| -> crate::Result<()> {
+        match &ls {
+            Some(ls) => ls.recover(a, uv)?,
+            None => recover::breadth_first(problem, faces, a, uv),
+        }
+        Ok(())
+    };
 
     let state = AdmmState::from_uv(problem, faces, init_uv);
     exec.upload(&state)?;
@@ -358,7 +372,7 @@ pub fn solve(
         let last = it >= opts.max_iters;
         if small || resync_due || last {
             let st = exec.download()?;
-            recovery.recover(&st.a, &mut uv)?;
+            recover(&st.a, &mut uv)?;
             let (e, flips) = map_energy(problem, faces, &uv, opts.energy);
             h.recovered_flips = Some(flips);
             h.recovered_energy = Some(e);
@@ -447,7 +461,7 @@ pub fn solve(
     );
     if interrupted {
         let st = exec.download()?;
-        recovery.recover(&st.a, &mut uv)?;
+        recover(&st.a, &mut uv)?;
         let (e, flips) = map_energy(problem, faces, &uv, opts.energy);
         if flips == 0 && e <= best {
             best_uv.clone_from(&uv);
