@@ -94,12 +94,13 @@ pub struct AdmmOptions {
     pub adaptive_mu: bool,
     /// Checks without a new low (< 0.95× the best) of the primal residual before μ is raised.
     pub stall_checks: usize,
-    /// Bound of the adaptive μ: within initial μ ×/÷ this factor.
+    /// Bound of the μ raises: μ stays at or below initial μ × this factor.
     pub mu_growth_max: f64,
     /// Bound of residual balancing: μ stays at or above initial μ ÷ this factor.
     pub mu_shrink_max: f64,
-    /// Halve μ when the primal residual is under tolerance and the dual residual is over 10×
-    /// it (at most once per `stall_checks` checks).
+    /// Halve μ when the consensus is tight (primal residual under `balance_primal ×
+    /// tol_primal`) but the maps still move (dual residual or energy change over tolerance), at
+    /// most once per `stall_checks` checks and never below a μ that had to be raised on a stall.
     pub balance: bool,
     /// Balancing needs the primal residual under this fraction of `tol_primal` (a tight
     /// consensus, well above the f32 rounding floor of the residual on devices).
@@ -146,8 +147,8 @@ impl AdmmOptions {
             // the first ~1500 iterations) in which the primal residual makes no new low for a
             // while without being unstable; raising μ there (8 checks) pinned lion_mask SD at
             // μ·F 8000, in a slow limit cycle it never left (10 000 iterations, not converged).
-            // With 16 it balances down to 250 and converges in 3450 (BENCHMARKS.md). MIPS keeps
-            // 8: 16 cost camelhead MIPS its convergence.
+            // With 16 it stays at 1000 and converges (2075 iterations, BENCHMARKS.md). MIPS
+            // keeps 8: 16 cost camelhead MIPS its convergence.
             stall_checks: match energy {
                 Energy::Mips => 8,
                 Energy::SymmetricDirichlet => 16,
