@@ -273,6 +273,17 @@ pub fn cluster_faces(
     }
 }
 
+/// Area-weighted normal sum of each region of `labels` (regions `0..=max label`; the mean
+/// normal is its direction).
+pub fn region_normal_sums(labels: &[u32], normals: &[V3], areas: &[f64]) -> Vec<V3> {
+    let n = labels.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+    let mut sums = vec![[0.0; 3]; n];
+    for (f, &c) in labels.iter().enumerate() {
+        sums[c as usize] = add(sums[c as usize], scale(normals[f], areas[f]));
+    }
+    sums
+}
+
 /// Angle (radians) between unit vectors.
 fn angle_between(a: V3, b: V3) -> f64 {
     dot(a, b).clamp(-1.0, 1.0).acos()
@@ -438,15 +449,8 @@ pub fn merge_unreachable_corners(
 ) -> usize {
     let mut merges = 0;
     for _ in 0..max_passes {
-        let n = face_cluster
-            .iter()
-            .map(|&c| c as usize + 1)
-            .max()
-            .unwrap_or(0);
-        let mut sums = vec![[0.0; 3]; n];
-        for (f, &c) in face_cluster.iter().enumerate() {
-            sums[c as usize] = add(sums[c as usize], scale(normals[f], areas[f]));
-        }
+        let sums = region_normal_sums(face_cluster, normals, areas);
+        let n = sums.len();
         let mean: Vec<V3> = sums
             .iter()
             .map(|&s| normalize(s).unwrap_or([0.0; 3]))
@@ -524,15 +528,8 @@ pub fn merge_collapsing_regions(
 ) -> usize {
     let mut merges = 0;
     for _ in 0..64 {
-        let n = face_cluster
-            .iter()
-            .map(|&c| c as usize + 1)
-            .max()
-            .unwrap_or(0);
-        let mut sums = vec![[0.0; 3]; n];
-        for (f, &c) in face_cluster.iter().enumerate() {
-            sums[c as usize] = add(sums[c as usize], scale(normals[f], areas[f]));
-        }
+        let sums = region_normal_sums(face_cluster, normals, areas);
+        let n = sums.len();
         let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); n];
         let mut open = vec![false; n];
         for ef in &topo.edge_faces {

@@ -18,6 +18,7 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
+use super::cluster::region_normal_sums;
 use super::geom::{add, normalize, scale, sub, V3};
 use crate::mesh::{Topology, NO_FACE};
 
@@ -69,10 +70,7 @@ pub fn relax_subset(
     let count = labels.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
     let mut changed_rounds = 0;
     for _ in 0..rounds {
-        let mut sums = vec![[0.0; 3]; count];
-        for (f, &c) in labels.iter().enumerate() {
-            sums[c as usize] = add(sums[c as usize], scale(normals[f], areas[f]));
-        }
+        let sums = region_normal_sums(labels, normals, areas);
         let proxy: Vec<V3> = sums
             .iter()
             .map(|&s| normalize(s).unwrap_or([0.0; 3]))
@@ -197,7 +195,9 @@ mod tests {
 
     /// A strip of 2·n triangles folded along x = n/2 into a roof: left half normal tilted one
     /// way, right half the other. The relaxed partition must split exactly at the ridge.
-    fn roof(n: usize) -> (TriMesh, Vec<V3>, Vec<f64>) {
+    /// A strip of 2n faces folded into a roof along its middle, with its topology (a manifold
+    /// strip by construction), face normals and areas.
+    fn roof(n: usize) -> (TriMesh, Topology, Vec<V3>, Vec<f64>) {
         let mut positions = Vec::new();
         for i in 0..=n {
             let x = i as f64;
@@ -212,16 +212,15 @@ mod tests {
             faces.push([b, c, d]);
         }
         let mesh = TriMesh { positions, faces };
+        let topo = Topology::build(&mesh, std::path::Path::new("roof")).unwrap();
         let (nr, ar) = super::super::geom::face_normals_areas(&mesh.positions, &mesh.faces);
-        (mesh, nr, ar)
+        (mesh, topo, nr, ar)
     }
 
     #[test]
     fn relax_moves_boundary_to_the_ridge() {
         let n = 8;
-        let (mesh, normals, areas) = roof(n);
-        // The roof is a manifold strip by construction.
-        let topo = Topology::build(&mesh, std::path::Path::new("roof")).unwrap();
+        let (_, topo, normals, areas) = roof(n);
         // Start with a wrong split: only the first two faces in region 0.
         let mut labels: Vec<u32> = (0..2 * n).map(|f| u32::from(f >= 2)).collect();
         let rounds = relax(&topo, &normals, &areas, &mut labels, 20);
@@ -233,9 +232,7 @@ mod tests {
     #[test]
     fn relax_keeps_a_settled_partition() {
         let n = 6;
-        let (mesh, normals, areas) = roof(n);
-        // The roof is a manifold strip by construction.
-        let topo = Topology::build(&mesh, std::path::Path::new("roof")).unwrap();
+        let (_, topo, normals, areas) = roof(n);
         let mut labels: Vec<u32> = (0..2 * n).map(|f| u32::from(f >= n)).collect();
         let before = labels.clone();
         assert_eq!(relax(&topo, &normals, &areas, &mut labels, 20), 0);
@@ -245,9 +242,7 @@ mod tests {
     #[test]
     fn split_cuts_a_roof_region_at_its_ridge() {
         let n = 8;
-        let (mesh, normals, areas) = roof(n);
-        // The roof is a manifold strip by construction.
-        let topo = Topology::build(&mesh, std::path::Path::new("roof")).unwrap();
+        let (_, topo, normals, areas) = roof(n);
         let mut labels = vec![0u32; 2 * n];
         assert!(split_region(&topo, &normals, &areas, &mut labels, 0, 1, 10));
         let ridge: Vec<bool> = (0..2 * n).map(|f| f >= n).collect();
@@ -261,7 +256,7 @@ mod tests {
     #[test]
     fn split_refuses_a_flat_region() {
         let n = 4;
-        let (mut mesh, _, _) = roof(n);
+        let (mut mesh, _, _, _) = roof(n);
         for p in &mut mesh.positions {
             p[2] = 0.0;
         }

@@ -460,9 +460,8 @@ pub fn newton(
             // the energy test below sees any tet the renormalisation inverts as +∞).
             for &v in &slide {
                 let q = &mut trial[v as usize];
-                let r = super::tet::dot(*q, *q).sqrt();
-                if r > 0.0 {
-                    *q = q.map(|c| c / r);
+                if let Some(u) = super::tet::to_unit_sphere(*q) {
+                    *q = u;
                 }
             }
             let e = obj.value(&trial);

@@ -18,6 +18,13 @@ pub struct TetMesh {
 
 pub use crate::init::vec3::{cross, dot, sub};
 
+/// `p / ‖p‖`, the nearest point of the unit sphere (`None` at the centre or for non-finite
+/// input): the retraction that keeps the ball target's sliding boundary on the sphere.
+pub fn to_unit_sphere(p: [f64; 3]) -> Option<[f64; 3]> {
+    let r = dot(p, p).sqrt();
+    (r > 0.0 && r.is_finite()).then(|| p.map(|c| c / r))
+}
+
 /// `x > 0`, false for NaN: the one orientation test (a NaN volume counts as inverted).
 #[inline]
 pub fn is_positive(x: f64) -> bool {

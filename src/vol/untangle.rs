@@ -24,7 +24,7 @@ use rayon::prelude::*;
 
 use super::energy::{det3, frob2, inv3, Mat3};
 use super::newton::{corner_weights, jacobian, Corner};
-use super::tet::{sub, TetMesh};
+use super::tet::{sub, to_unit_sphere, TetMesh};
 use super::VolError;
 
 /// Settings of the untangling stage.
@@ -224,13 +224,11 @@ pub fn untangle_sliding(
         .filter(|&v| on_sphere[v] && !fixed[v])
         .collect();
     for &v in &sliding {
-        let r = super::tet::dot(x[v], x[v]).sqrt();
-        if !(r > 0.0 && r.is_finite()) {
-            return Err(VolError::Input(format!(
+        x[v] = to_unit_sphere(x[v]).ok_or_else(|| {
+            VolError::Input(format!(
                 "untangle: sliding vertex {v} is at the centre of the sphere"
-            )));
-        }
-        x[v] = x[v].map(|c| c / r);
+            ))
+        })?;
     }
     // Tangent part of the gradient at the sliding vertices (x on the unit sphere).
     let project = |x: &[[f64; 3]], g: &mut [f64]| {
@@ -244,9 +242,8 @@ pub fn untangle_sliding(
     };
     let retract = |p: &mut [[f64; 3]]| {
         for &v in &sliding {
-            let r = super::tet::dot(p[v], p[v]).sqrt();
-            if r > 0.0 {
-                p[v] = p[v].map(|c| c / r);
+            if let Some(u) = to_unit_sphere(p[v]) {
+                p[v] = u;
             }
         }
     };
