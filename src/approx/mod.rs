@@ -23,6 +23,7 @@ pub mod geom;
 pub mod lloyd;
 pub mod normals_l0;
 pub mod polygons;
+pub mod reassign;
 pub mod sparse;
 pub mod untangle;
 pub mod untangle2d;
@@ -95,6 +96,9 @@ pub struct ApproxOptions {
     pub split_per_pass: usize,
     /// Rounds of "merge the regions that still fold, planarize again".
     pub max_merge_passes: usize,
+    /// Largest number of face moves tried per pass against folds that no vertex placement
+    /// removes (see [`reassign`]); 0 = off.
+    pub reassign_trials: usize,
     pub boundary: BoundaryL0Options,
 }
 
@@ -107,6 +111,7 @@ impl ApproxOptions {
             normals: NormalL0Options::default(),
             vertices: VertexUpdateOptions::default(),
             max_merge_passes: 0,
+            reassign_trials: 4000,
             max_split_passes: 4,
             split_per_pass: 1,
             corner_reach_rel: 0.04,
@@ -193,6 +198,9 @@ pub struct ApproxReport {
     /// Faces moved to a neighbouring region: all three corners shared with it, or two of
     /// three edge-neighbours in it (boundary smoothing).
     pub faces_reassigned: usize,
+    /// Faces moved into a neighbouring region after planarity because no vertex placement
+    /// removed the fold there (see [`reassign`]), summed over the passes.
+    pub fold_moves: usize,
     /// Two-region boundary chains re-spaced monotonically along their line.
     pub chains_respaced: usize,
     /// Local Tutte repairs run to remove folds.
@@ -334,6 +342,7 @@ pub fn approximate(
         untangle::Untangled,
     )> = None;
     let mut merge_passes = 0;
+    let mut faces_moved = 0;
     let mut n_clusters = n_clusters;
     let (mut split_passes, mut regions_split) = (0, 0);
     loop {
@@ -368,6 +377,25 @@ pub fn approximate(
             &mut pl.positions,
             min_area,
         )?;
+        let moved = if opts.reassign_trials > 0 {
+            reassign::reassign_bad_faces(
+                topo,
+                &mesh.faces,
+                &mut face_cluster,
+                &pl.planes,
+                &mesh.positions,
+                &mut pl.positions,
+                min_area,
+                &reassign::ReassignOptions {
+                    rounds: 8,
+                    tol: 1e-8 * diag,
+                    max_trials: opts.reassign_trials,
+                },
+            )?
+        } else {
+            reassign::Reassigned::default()
+        };
+        faces_moved += moved.faces_moved;
         times.planarize += t.elapsed().as_secs_f64();
         let bad = untangle::bad_faces(
             &pl.positions,
@@ -504,6 +532,7 @@ pub fn approximate(
         flipped_vs_input: flipped_in,
         degenerate_faces: degenerate,
         faces_reassigned: reassigned + smoothed,
+        fold_moves: faces_moved,
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
         regions_untangled: ut.regions_embedded,

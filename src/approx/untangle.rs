@@ -20,7 +20,9 @@
 use sprs::TriMat;
 
 use super::cluster::vertex_clusters;
-use super::geom::{add, cross, dot, face_normals_areas, norm, normalize, scale, sub, Plane, V3};
+use super::geom::{
+    add, cross, dot, face_area_normal, face_normals_areas, norm, normalize, scale, sub, Plane, V3,
+};
 use super::sparse::solve_spd;
 use super::untangle2d::{untangle_2d, Reference, Untangle2dOptions};
 use crate::linalg::SolveError;
@@ -47,14 +49,44 @@ pub fn untangle(
     pos: &mut [V3],
     min_area: f64,
 ) -> Result<Untangled, SolveError> {
-    let n = topo.n_vertices;
     let vc = vertex_clusters(topo, fc);
-    let mut on_border = vec![false; n];
+    let on_border = border_vertices(topo);
+    let mut out = Untangled {
+        chains_respaced: respace_chains(topo, fc, &vc, &on_border, input, pos),
+        ..Untangled::default()
+    };
+    let bad = bad_faces(pos, faces, fc, planes, min_area);
+    out.patches_embedded = repair_patches(
+        topo, faces, fc, planes, &vc, &on_border, pos, min_area, bad, None,
+    )?;
+    out.regions_embedded = embed_folded_regions(
+        topo, faces, fc, planes, &vc, &on_border, input, pos, min_area,
+    )?;
+    Ok(out)
+}
+
+/// Vertices on the mesh border.
+pub(crate) fn border_vertices(topo: &Topology) -> Vec<bool> {
+    let mut on_border = vec![false; topo.n_vertices];
     for &e in &topo.boundary_edges {
         for v in topo.edges[e as usize] {
             on_border[v as usize] = true;
         }
     }
+    on_border
+}
+
+/// Re-spaces every two-region chain between its end corners by its input arc-length fractions
+/// (see module doc); idempotent while the corners stay. Returns the chains re-spaced.
+pub(crate) fn respace_chains(
+    topo: &Topology,
+    fc: &[u32],
+    vc: &[Vec<u32>],
+    on_border: &[bool],
+    input: &[V3],
+    pos: &mut [V3],
+) -> usize {
+    let n = topo.n_vertices;
     // Region-boundary adjacency.
     let mut badj: Vec<Vec<u32>> = vec![Vec::new(); n];
     for (e, ef) in topo.edge_faces.iter().enumerate() {
@@ -65,7 +97,7 @@ pub fn untangle(
         }
     }
     let is_chain = |v: usize| vc[v].len() == 2 && !on_border[v] && badj[v].len() == 2;
-    let mut out = Untangled::default();
+    let mut respaced = 0;
     let mut done = vec![false; n];
     for a in 0..n {
         if badj[a].is_empty() || is_chain(a) {
@@ -115,12 +147,36 @@ pub fn untangle(
             for (i, &v) in chain.iter().enumerate() {
                 pos[v] = add(pa, scale(sub(pb, pa), lens[i + 1] / total));
             }
-            out.chains_respaced += 1;
+            respaced += 1;
         }
     }
+    respaced
+}
+
+/// Local Tutte repair in patches of growing radius around the `bad` faces (see module doc).
+/// With `scope`, only bad faces among those faces are looked at and counted (the caller knows
+/// nothing else moved). Returns the repairs kept.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn repair_patches(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &[u32],
+    planes: &[Option<Plane>],
+    vc: &[Vec<u32>],
+    on_border: &[bool],
+    pos: &mut [V3],
+    min_area: f64,
+    mut bad: Vec<usize>,
+    scope: Option<&[usize]>,
+) -> Result<usize, SolveError> {
+    let n = topo.n_vertices;
+    let count = |pos: &[V3]| match scope {
+        Some(s) => bad_faces_among(pos, faces, fc, planes, min_area, s),
+        None => bad_faces(pos, faces, fc, planes, min_area),
+    };
     // Local Tutte repair: patches of growing radius around the bad faces.
     let mut radius = 1;
-    let mut bad = bad_faces(pos, faces, fc, planes, min_area);
+    let mut embedded = 0;
     while radius <= 64 && !bad.is_empty() {
         // Vertices within `radius` rings of a bad face (inside the same region).
         let mut ring = vec![usize::MAX; n];
@@ -152,10 +208,10 @@ pub fn untangle(
         if !free.is_empty() {
             let saved: Vec<V3> = free.iter().map(|&v| pos[v]).collect();
             embed(topo, &free, &vc, planes, pos)?;
-            let after = bad_faces(pos, faces, fc, planes, min_area);
+            let after = count(pos);
             if after.len() < bad.len() {
                 bad = after;
-                out.patches_embedded += 1;
+                embedded += 1;
                 continue; // same radius again around what is left
             }
             for (&v, &p) in free.iter().zip(&saved) {
@@ -164,10 +220,7 @@ pub fn untangle(
         }
         radius *= 2;
     }
-    out.regions_embedded = embed_folded_regions(
-        topo, faces, fc, planes, &vc, &on_border, input, pos, min_area,
-    )?;
-    Ok(out)
+    Ok(embedded)
 }
 
 /// Whole-region repair: the interior vertices of each region that still has bad faces are
@@ -331,6 +384,25 @@ pub fn bad_faces(
     (0..faces.len())
         .filter(|&f| {
             planes[fc[f] as usize].is_some_and(|p| dot(n[f], p.n) <= 0.0) || a[f] <= min_area
+        })
+        .collect()
+}
+
+/// The faces of `among` that are flipped against their region's plane or have area ≤ `min_area`.
+pub fn bad_faces_among(
+    pos: &[V3],
+    faces: &[[u32; 3]],
+    fc: &[u32],
+    planes: &[Option<Plane>],
+    min_area: f64,
+    among: &[usize],
+) -> Vec<usize> {
+    among
+        .iter()
+        .copied()
+        .filter(|&f| {
+            let n = face_area_normal(pos, faces[f]);
+            planes[fc[f] as usize].is_some_and(|p| dot(n, p.n) <= 0.0) || norm(n) <= min_area
         })
         .collect()
 }

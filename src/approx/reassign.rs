@@ -1,0 +1,292 @@
+//! Moves faces across region boundaries where no vertex placement can remove a fold.
+//!
+//! Once the planes are fixed, a face whose three corners all sit on region boundaries is fixed
+//! too: its corners lie on plane–plane lines or at three-plane points. At a reflex corner of a
+//! region's outline, the face spanning the two boundary edges there is flipped wherever the
+//! chain vertices slide; where three corners share a face, nothing moves at all. These are most
+//! of the bad faces the untangler leaves ([`super::untangle`]). Changing which region such a
+//! face (or a face next to it) belongs to changes the outline there, and with it the constraint
+//! set of its corners. So this is a local search with the planes frozen: try moving one face
+//! near a bad face into an edge-adjacent region, put the corners on their new plane sets,
+//! re-space the chains, repair the interior around what is still bad, and keep the move when
+//! the regions it touches have fewer bad faces than before.
+//!
+//! A move is only tried when both regions stay locally disk-like (one fan of each around every
+//! corner of the face, so no region is cut in two or pinched at a vertex) and when every corner
+//! still has a point on all its planes (within `tol`: exact planarity is kept).
+
+use super::cluster::vertex_clusters;
+use super::geom::{add, solve_dense, Plane, V3};
+use super::untangle::{bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains};
+use crate::linalg::SolveError;
+use crate::mesh::{Topology, NO_FACE};
+
+/// What [`reassign_bad_faces`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Reassigned {
+    /// Moves kept.
+    pub faces_moved: usize,
+    /// Moves tried (each costs a local re-layout).
+    pub trials: usize,
+}
+
+/// Options of [`reassign_bad_faces`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReassignOptions {
+    /// Rounds over the bad faces; a round that keeps no move ends the search.
+    pub rounds: usize,
+    /// Largest distance of a moved corner to any of its planes (absolute).
+    pub tol: f64,
+    /// Largest number of moves tried overall (bounds the time on meshes with many folds).
+    pub max_trials: usize,
+}
+
+/// Nearest point to `x` on all `planes` (least squares, then checked): `None` when the planes
+/// have no common point within `tol` or do not pin enough down to be solved stably.
+fn onto_planes(x: V3, planes: &[Plane], tol: f64) -> Option<V3> {
+    // Minimise |y − x|² over the planes' intersection: y = x + Nᵀμ, N Nᵀ μ = −(N x + d),
+    // solved on the (at most three) independent rows by damped normal equations in 3D.
+    let mut a = [0.0; 9];
+    let mut b = [0.0; 3];
+    for p in planes {
+        let r = p.signed_distance(x);
+        for i in 0..3 {
+            b[i] -= p.n[i] * r;
+            for j in 0..3 {
+                a[i * 3 + j] += p.n[i] * p.n[j];
+            }
+        }
+    }
+    // Directions the planes do not constrain keep x: a small ridge ε (relative to the unit
+    // normals' Gram matrix) leaves them at δ ≈ 0 and barely moves the constrained ones.
+    for i in 0..3 {
+        a[i * 3 + i] += 1e-12;
+    }
+    solve_dense(&mut a, &mut b, 3)?;
+    let y = add(x, b);
+    planes
+        .iter()
+        .all(|p| p.signed_distance(y).abs() <= tol)
+        .then_some(y)
+}
+
+/// Number of contiguous fans of faces satisfying `inside` around vertex `v` (0 when none;
+/// 1 when all). Each fan ends where the edge leaving `v` in face order leads to a face outside
+/// (or to no face: the mesh border). Needs consistently oriented faces (validated input).
+fn fans(topo: &Topology, faces: &[[u32; 3]], v: u32, inside: &dyn Fn(usize) -> bool) -> usize {
+    let vf = topo.vertex_faces(v);
+    let mut ends = 0;
+    let mut all = true;
+    for &h in vf {
+        let h = h as usize;
+        if !inside(h) {
+            all = false;
+            continue;
+        }
+        let k = faces[h].iter().position(|&w| w == v).unwrap_or(0);
+        let e = topo.face_edges[h][k];
+        // Side k of a face runs from f[k] to f[k+1] (see `Topology::face_edges`).
+        let ef = topo.edge_faces[e as usize];
+        let other = if ef[0] as usize == h { ef[1] } else { ef[0] };
+        if other == NO_FACE || !inside(other as usize) {
+            ends += 1;
+        }
+    }
+    if all && !vf.is_empty() {
+        1
+    } else {
+        ends
+    }
+}
+
+/// Local search over face moves (see module doc). `fc` and `pos` are changed in place; planes
+/// stay. `input` are the input positions (chain arc lengths).
+#[allow(clippy::too_many_arguments)]
+pub fn reassign_bad_faces(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    opts: &ReassignOptions,
+) -> Result<Reassigned, SolveError> {
+    let mut out = Reassigned::default();
+    let on_border = border_vertices(topo);
+    let mut region_faces: Vec<Vec<usize>> = vec![Vec::new(); planes.len()];
+    for (f, &c) in fc.iter().enumerate() {
+        region_faces[c as usize].push(f);
+    }
+    let edge_neighbor = |f: usize, e: u32| {
+        let ef = topo.edge_faces[e as usize];
+        let o = if ef[0] as usize == f { ef[1] } else { ef[0] };
+        (o != NO_FACE).then_some(o as usize)
+    };
+    for _ in 0..opts.rounds {
+        let bad = bad_faces(pos, faces, fc, planes, min_area);
+        if bad.is_empty() {
+            break;
+        }
+        let mut kept = 0;
+        for &f0 in &bad {
+            if out.trials >= opts.max_trials {
+                return Ok(out);
+            }
+            // Still bad? (an earlier move nearby may have fixed it)
+            if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
+                continue;
+            }
+            // The bad face first, then the faces around its corners.
+            let mut cands: Vec<usize> = vec![f0];
+            for &v in &faces[f0] {
+                for &h in topo.vertex_faces(v) {
+                    if !cands.contains(&(h as usize)) {
+                        cands.push(h as usize);
+                    }
+                }
+            }
+            'cand: for &g in &cands {
+                let from = fc[g];
+                let mut targets: Vec<u32> = topo.face_edges[g]
+                    .iter()
+                    .filter_map(|&e| edge_neighbor(g, e))
+                    .map(|h| fc[h])
+                    .filter(|&c| c != from && planes[c as usize].is_some())
+                    .collect();
+                targets.sort_unstable();
+                targets.dedup();
+                for to in targets {
+                    if out.trials >= opts.max_trials {
+                        return Ok(out);
+                    }
+                    if try_move(
+                        topo,
+                        faces,
+                        fc,
+                        planes,
+                        input,
+                        pos,
+                        min_area,
+                        opts.tol,
+                        &on_border,
+                        &mut region_faces,
+                        g,
+                        to,
+                        &mut out,
+                    )? {
+                        kept += 1;
+                        break 'cand;
+                    }
+                }
+            }
+        }
+        if kept == 0 {
+            break;
+        }
+    }
+    Ok(out)
+}
+
+/// Tries moving face `g` into region `to`; keeps it (returns true) when the regions around
+/// `g` end with fewer bad faces, else restores everything.
+#[allow(clippy::too_many_arguments)]
+fn try_move(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    tol: f64,
+    on_border: &[bool],
+    region_faces: &mut [Vec<usize>],
+    g: usize,
+    to: u32,
+    out: &mut Reassigned,
+) -> Result<bool, SolveError> {
+    let from = fc[g];
+    if region_faces[from as usize].len() <= 1 {
+        return Ok(false);
+    }
+    // Both regions stay one fan around each corner of g after the move.
+    let simple = faces[g].iter().all(|&v| {
+        let in_to = |h: usize| h == g || fc[h] == to;
+        let in_from = |h: usize| h != g && fc[h] == from;
+        fans(topo, faces, v, &in_to) <= 1 && fans(topo, faces, v, &in_from) <= 1
+    });
+    if !simple {
+        return Ok(false);
+    }
+    out.trials += 1;
+    // Regions whose faces can change: every region at a corner of g (chains and corners
+    // there move), plus `to`.
+    let mut regions: Vec<u32> = faces[g]
+        .iter()
+        .flat_map(|&v| topo.vertex_faces(v).iter().map(|&h| fc[h as usize]))
+        .chain(std::iter::once(to))
+        .collect();
+    regions.sort_unstable();
+    regions.dedup();
+    let scope: Vec<usize> = regions
+        .iter()
+        .flat_map(|&r| region_faces[r as usize].iter().copied())
+        .collect();
+    let before = bad_faces_among(pos, faces, fc, planes, min_area, &scope).len();
+    let saved = pos.to_vec();
+    fc[g] = to;
+    let restore = |fc: &mut [u32], pos: &mut [V3]| {
+        fc[g] = from;
+        pos.copy_from_slice(&saved);
+    };
+    // Corners of g onto their new plane sets.
+    for &v in &faces[g] {
+        let mut cs: Vec<u32> = topo
+            .vertex_faces(v)
+            .iter()
+            .map(|&h| fc[h as usize])
+            .collect();
+        cs.sort_unstable();
+        cs.dedup();
+        let ps: Vec<Plane> = cs.iter().filter_map(|&c| planes[c as usize]).collect();
+        match onto_planes(pos[v as usize], &ps, tol) {
+            Some(y) => pos[v as usize] = y,
+            None => {
+                restore(fc, pos);
+                return Ok(false);
+            }
+        }
+    }
+    let vc = vertex_clusters(topo, fc);
+    respace_chains(topo, fc, &vc, on_border, input, pos);
+    let bad = bad_faces_among(pos, faces, fc, planes, min_area, &scope);
+    let after = if bad.len() < before {
+        bad.len()
+    } else {
+        repair_patches(
+            topo,
+            faces,
+            fc,
+            planes,
+            &vc,
+            on_border,
+            pos,
+            min_area,
+            bad,
+            Some(&scope),
+        )?;
+        bad_faces_among(pos, faces, fc, planes, min_area, &scope).len()
+    };
+    if after < before {
+        let r = &mut region_faces[from as usize];
+        if let Some(i) = r.iter().position(|&h| h == g) {
+            r.swap_remove(i);
+        }
+        region_faces[to as usize].push(g);
+        out.faces_moved += 1;
+        return Ok(true);
+    }
+    restore(fc, pos);
+    Ok(false)
+}
