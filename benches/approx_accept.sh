@@ -5,7 +5,7 @@
 set -eu
 MESHES=${1:-../shared/meshes}
 REPS=${2:-3}
-BIN=target/release/foldfree
+BIN=${BIN:-target/release/foldfree}
 OUT=target/approx-accept
 mkdir -p "$OUT"
 for m in cad/fandisk cad/block cad/rocker_arm closed/bunny_npm; do

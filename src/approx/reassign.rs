@@ -17,7 +17,9 @@
 
 use super::cluster::vertex_clusters;
 use super::geom::{add, solve_dense, Plane, V3};
-use super::untangle::{bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains};
+use super::untangle::{
+    bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains,
+};
 use crate::linalg::SolveError;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -275,6 +277,7 @@ fn try_move(
             min_area,
             bad,
             Some(&scope),
+            4,
         )?;
         bad_faces_among(pos, faces, fc, planes, min_area, &scope).len()
     };

@@ -57,7 +57,7 @@ pub fn untangle(
     };
     let bad = bad_faces(pos, faces, fc, planes, min_area);
     out.patches_embedded = repair_patches(
-        topo, faces, fc, planes, &vc, &on_border, pos, min_area, bad, None,
+        topo, faces, fc, planes, &vc, &on_border, pos, min_area, bad, None, 64,
     )?;
     out.regions_embedded = embed_folded_regions(
         topo, faces, fc, planes, &vc, &on_border, input, pos, min_area,
@@ -168,6 +168,7 @@ pub(crate) fn repair_patches(
     min_area: f64,
     mut bad: Vec<usize>,
     scope: Option<&[usize]>,
+    max_radius: usize,
 ) -> Result<usize, SolveError> {
     let n = topo.n_vertices;
     let count = |pos: &[V3]| match scope {
@@ -177,7 +178,7 @@ pub(crate) fn repair_patches(
     // Local Tutte repair: patches of growing radius around the bad faces.
     let mut radius = 1;
     let mut embedded = 0;
-    while radius <= 64 && !bad.is_empty() {
+    while radius <= max_radius && !bad.is_empty() {
         // Vertices within `radius` rings of a bad face (inside the same region).
         let mut ring = vec![usize::MAX; n];
         let mut frontier: Vec<usize> = Vec::new();
@@ -207,7 +208,7 @@ pub(crate) fn repair_patches(
         // Keep a repair only when it leaves fewer bad faces (a non-convex patch can add folds).
         if !free.is_empty() {
             let saved: Vec<V3> = free.iter().map(|&v| pos[v]).collect();
-            embed(topo, &free, &vc, planes, pos)?;
+            embed(topo, &free, vc, planes, pos)?;
             let after = count(pos);
             if after.len() < bad.len() {
                 bad = after;
