@@ -293,3 +293,65 @@ fn try_move(
     restore(fc, pos);
     Ok(false)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::TriMesh;
+    use std::path::Path;
+
+    /// 3×3 vertices, 8 triangles; the centre vertex 4 has six faces around it.
+    fn grid() -> (TriMesh, Topology) {
+        let positions = (0..9)
+            .map(|i| [(i % 3) as f64, (i / 3) as f64, 0.0])
+            .collect();
+        let mut faces = Vec::new();
+        for y in 0..2u32 {
+            for x in 0..2u32 {
+                let a = y * 3 + x;
+                faces.push([a, a + 1, a + 4]);
+                faces.push([a, a + 4, a + 3]);
+            }
+        }
+        let m = TriMesh { positions, faces };
+        let t = Topology::build(&m, Path::new("grid")).unwrap();
+        (m, t)
+    }
+
+    #[test]
+    fn fans_count_contiguous_runs_around_a_vertex() {
+        let (m, t) = grid();
+        let around: Vec<usize> = t.vertex_faces(4).iter().map(|&f| f as usize).collect();
+        assert_eq!(around.len(), 6);
+        assert_eq!(fans(&t, &m.faces, 4, &|_| true), 1);
+        assert_eq!(fans(&t, &m.faces, 4, &|_| false), 0);
+        // Two faces on opposite sides of the centre: two runs; one face: one run.
+        let (a, b) = (around[0], around[0] ^ 7);
+        assert!(around.contains(&b));
+        assert_eq!(fans(&t, &m.faces, 4, &|h| h == a || h == b), 2);
+        assert_eq!(fans(&t, &m.faces, 4, &|h| h == a), 1);
+        // On the border: the missing face ends a run.
+        assert_eq!(fans(&t, &m.faces, 0, &|_| true), 1);
+    }
+
+    #[test]
+    fn corners_go_to_the_planes_common_point_or_are_refused() {
+        let p = |n: V3, d: f64| Plane { n, d };
+        let three = [
+            p([1.0, 0.0, 0.0], -1.0),
+            p([0.0, 1.0, 0.0], -2.0),
+            p([0.0, 0.0, 1.0], -3.0),
+        ];
+        let y = onto_planes([0.0; 3], &three, 1e-9).unwrap();
+        for (a, b) in y.iter().zip([1.0, 2.0, 3.0]) {
+            assert!((a - b).abs() < 1e-9);
+        }
+        // One plane: the orthogonal projection.
+        let y = onto_planes([5.0, 6.0, 7.0], &three[..1], 1e-9).unwrap();
+        assert!((y[0] - 1.0).abs() < 1e-9 && (y[1] - 6.0).abs() < 1e-9);
+        // A fourth plane missing that point: no common point, refused.
+        let mut four = three.to_vec();
+        four.push(p([0.6, 0.8, 0.0], -1.0));
+        assert!(onto_planes([0.0; 3], &four, 1e-6).is_none());
+    }
+}
