@@ -12,8 +12,10 @@
 //!    once more towards the regions' mean normals (stage 2 again), so stage 4 only has to
 //!    remove a small residual instead of folding curved regions flat;
 //! 4. [`boundary_l0`]: boundary-vertex L0 with planarity constraints (ALM), then projection;
-//!    regions that still fold are split in two with unused budget (< K regions) and stage 4
-//!    rerun, keeping the pass with the fewest bad faces;
+//!    faces that still fold with all corners on region boundaries are moved into a
+//!    neighbouring region with the planes frozen ([`reassign`]); regions that still fold are
+//!    split in two with unused budget (< K regions) and stage 4 rerun, keeping the pass with
+//!    the fewest bad faces;
 //! 5. [`polygons`]: one polygon per region, corners where boundaries meet or turn.
 #![forbid(unsafe_code)]
 
