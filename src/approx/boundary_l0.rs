@@ -119,7 +119,7 @@ fn chain_rows(topo: &Topology, face_cluster: &[u32]) -> Vec<[usize; 3]> {
 
 /// Nearest point to `x0` on the planes `ps` (least squares when inconsistent): Tikhonov-damped
 /// normal equations (NᵀN + εI)x = −Nᵀd + εx0, whose ε→0 limit is the projection.
-fn project(x0: V3, ps: &[Plane], eps: f64) -> Option<V3> {
+pub(crate) fn project(x0: V3, ps: &[Plane], eps: f64) -> Option<V3> {
     // Relative to x0 for accuracy: x = x0 + δ, (NᵀN + εI)δ = −Nᵀ(Nx0 + d).
     let mut a = [0.0; 9];
     let mut b = [0.0; 3];

@@ -15,8 +15,9 @@
 //! corner of the face, so no region is cut in two or pinched at a vertex) and when every corner
 //! still has a point on all its planes (within `tol`: exact planarity is kept).
 
+use super::boundary_l0::project;
 use super::cluster::vertex_clusters;
-use super::geom::{add, solve_dense, Plane, V3};
+use super::geom::{Plane, V3};
 use super::untangle::{
     bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains,
 };
@@ -46,26 +47,8 @@ pub struct ReassignOptions {
 /// Nearest point to `x` on all `planes` (least squares, then checked): `None` when the planes
 /// have no common point within `tol` or do not pin enough down to be solved stably.
 fn onto_planes(x: V3, planes: &[Plane], tol: f64) -> Option<V3> {
-    // Minimise |y − x|² over the planes' intersection: y = x + Nᵀμ, N Nᵀ μ = −(N x + d),
-    // solved on the (at most three) independent rows by damped normal equations in 3D.
-    let mut a = [0.0; 9];
-    let mut b = [0.0; 3];
-    for p in planes {
-        let r = p.signed_distance(x);
-        for i in 0..3 {
-            b[i] -= p.n[i] * r;
-            for j in 0..3 {
-                a[i * 3 + j] += p.n[i] * p.n[j];
-            }
-        }
-    }
-    // Directions the planes do not constrain keep x: a small ridge ε (relative to the unit
-    // normals' Gram matrix) leaves them at δ ≈ 0 and barely moves the constrained ones.
-    for i in 0..3 {
-        a[i * 3 + i] += 1e-12;
-    }
-    solve_dense(&mut a, &mut b, 3)?;
-    let y = add(x, b);
+    // A tiny ridge keeps the directions the planes leave free at x.
+    let y = project(x, planes, 1e-12)?;
     planes
         .iter()
         .all(|p| p.signed_distance(y).abs() <= tol)
