@@ -303,17 +303,20 @@ fn merged_cone(sa: V3, ca: f64, sb: V3, cb: f64) -> f64 {
 /// Sorted distinct regions around each vertex.
 pub fn vertex_clusters(topo: &Topology, face_cluster: &[u32]) -> Vec<Vec<u32>> {
     (0..topo.n_vertices as u32)
-        .map(|v| {
-            let mut c: Vec<u32> = topo
-                .vertex_faces(v)
-                .iter()
-                .map(|&f| face_cluster[f as usize])
-                .collect();
-            c.sort_unstable();
-            c.dedup();
-            c
-        })
+        .map(|v| regions_at(topo, face_cluster, v))
         .collect()
+}
+
+/// Sorted distinct regions around vertex `v`.
+pub fn regions_at(topo: &Topology, face_cluster: &[u32], v: u32) -> Vec<u32> {
+    let mut c: Vec<u32> = topo
+        .vertex_faces(v)
+        .iter()
+        .map(|&f| face_cluster[f as usize])
+        .collect();
+    c.sort_unstable();
+    c.dedup();
+    c
 }
 
 /// Reassigns faces whose three vertices all lie in another region too: such a face would have

@@ -16,7 +16,7 @@
 //! still has a point on all its planes (within `tol`: exact planarity is kept).
 
 use super::boundary_l0::project;
-use super::cluster::vertex_clusters;
+use super::cluster::{regions_at, vertex_clusters};
 use super::geom::{Plane, V3};
 use super::untangle::{
     bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains,
@@ -227,14 +227,10 @@ fn try_move(
     };
     // Corners of g onto their new plane sets.
     for &v in &faces[g] {
-        let mut cs: Vec<u32> = topo
-            .vertex_faces(v)
+        let ps: Vec<Plane> = regions_at(topo, fc, v)
             .iter()
-            .map(|&h| fc[h as usize])
+            .filter_map(|&c| planes[c as usize])
             .collect();
-        cs.sort_unstable();
-        cs.dedup();
-        let ps: Vec<Plane> = cs.iter().filter_map(|&c| planes[c as usize]).collect();
         match onto_planes(pos[v as usize], &ps, tol) {
             Some(y) => pos[v as usize] = y,
             None => {

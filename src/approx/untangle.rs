@@ -253,15 +253,10 @@ fn embed_folded_regions(
         }
     }
     let count_bad = |pos: &[V3], r: usize| {
-        let Some(p) = planes[r] else { return 0 };
-        region_faces[r]
-            .iter()
-            .filter(|&&f| {
-                let [a, b, c] = faces[f].map(|v| pos[v as usize]);
-                let n = cross(sub(b, a), sub(c, a));
-                dot(n, p.n) <= 0.0 || 0.5 * norm(n) <= min_area
-            })
-            .count()
+        if planes[r].is_none() {
+            return 0;
+        }
+        bad_faces_among(pos, faces, fc, planes, min_area, &region_faces[r]).len()
     };
     let mut changed = 0;
     for r in 0..n_regions {
