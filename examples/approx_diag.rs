@@ -29,6 +29,19 @@ fn main() {
         per[out.face_cluster[f] as usize] += 1;
     }
     println!("bad {} regions {}", bad.len(), nreg);
+    if let Some(dump) = a.get(3) {
+        // Raw state for offline analysis: positions, faces, regions, planes, bad faces.
+        let planes: Vec<[f64; 4]> = out
+            .planes
+            .iter()
+            .map(|p| p.map_or([0.0; 4], |p| [p.n[0], p.n[1], p.n[2], p.d]))
+            .collect();
+        let j = format!(
+            "{{\"pos\":{:?},\"input\":{:?},\"faces\":{:?},\"fc\":{:?},\"planes\":{:?},\"bad\":{:?}}}",
+            out.positions, m.positions, m.faces, out.face_cluster, planes, bad
+        );
+        std::fs::write(dump, j).unwrap();
+    }
     for r in 0..nreg {
         if per[r] == 0 {
             continue;

@@ -15,7 +15,8 @@
 //!    faces that still fold with all corners on region boundaries are moved into a
 //!    neighbouring region with the planes frozen ([`reassign`]); regions that still fold are
 //!    split in two with unused budget (< K regions) and stage 4 rerun, keeping the pass with
-//!    the fewest bad faces;
+//!    the fewest bad faces; on that pass, vertices near the folds left slide along their
+//!    planes and plane–plane lines across region boundaries ([`slide`]);
 //! 5. [`polygons`]: one polygon per region, corners where boundaries meet or turn.
 #![forbid(unsafe_code)]
 
@@ -26,6 +27,7 @@ pub mod lloyd;
 pub mod normals_l0;
 pub mod polygons;
 pub mod reassign;
+pub mod slide;
 pub mod sparse;
 pub mod untangle;
 pub mod untangle2d;
@@ -101,6 +103,11 @@ pub struct ApproxOptions {
     /// Largest number of face moves tried per pass against folds that no vertex placement
     /// removes (see [`reassign`]); 0 = off.
     pub reassign_trials: usize,
+    /// Rings around each fold within which vertices slide along their planes and plane–plane
+    /// lines, across region boundaries (see [`slide`]); 0 = off.
+    pub slide_radius: usize,
+    /// Largest number of fold moves on the kept pass repaired by that barrier untangler.
+    pub slide_repairs: usize,
     pub boundary: BoundaryL0Options,
 }
 
@@ -114,6 +121,8 @@ impl ApproxOptions {
             vertices: VertexUpdateOptions::default(),
             max_merge_passes: 0,
             reassign_trials: 4000,
+            slide_radius: 3,
+            slide_repairs: 400,
             max_split_passes: 4,
             split_per_pass: 1,
             corner_reach_rel: 0.04,
@@ -203,6 +212,9 @@ pub struct ApproxReport {
     /// Faces moved into a neighbouring region after planarity because no vertex placement
     /// removed the fold there (see [`reassign`]), summed over the passes.
     pub fold_moves: usize,
+    /// Neighbourhoods of folds where sliding vertices across region boundaries removed bad
+    /// faces (see [`slide`]), on the kept pass.
+    pub slides_kept: usize,
     /// Two-region boundary chains re-spaced monotonically along their line.
     pub chains_respaced: usize,
     /// Local Tutte repairs run to remove folds.
@@ -392,6 +404,9 @@ pub fn approximate(
                     rounds: 8,
                     tol: 1e-8 * diag,
                     max_trials: opts.reassign_trials,
+                    // The barrier repair of moves is kept for the final pass (below).
+                    max_slides: 0,
+                    max_slide_faces: 0,
                 },
             )?
         } else {
@@ -428,6 +443,7 @@ pub fn approximate(
                 0 => budget,
                 p => p.min(budget),
             };
+            let unsplit = face_cluster.clone();
             let mut next = n_clusters as u32;
             for c in split_candidates(&bad, &face_cluster, n_clusters, per_pass) {
                 if lloyd::split_region(topo, &n0, &a0, &mut face_cluster, c, next, 10) {
@@ -438,6 +454,11 @@ pub fn approximate(
             cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
             n_clusters = renumber(&mut face_cluster);
             times.cluster += t.elapsed().as_secs_f64();
+            if face_cluster == unsplit {
+                // Nothing split (or the collapse fix undid it): the next pass would repeat
+                // this one exactly.
+                break;
+            }
             continue;
         }
         if merge_passes >= opts.max_merge_passes || n_clusters <= 1 {
@@ -451,9 +472,49 @@ pub fn approximate(
         times.cluster += t.elapsed().as_secs_f64();
     }
     // `best` is set in the first pass, which always runs.
-    let Some((_, face_cluster, n_clusters, pl, ut)) = best else {
+    let Some((nbad, mut face_cluster, n_clusters, mut pl, ut)) = best else {
         return Err(ApproxError::BadInput("no planarization pass ran".into()));
     };
+    // Last, on the kept pass only: fold moves again, now also repaired by the barrier untangler
+    // across boundaries, then vertices near the folds left slide across region boundaries.
+    // Both keep a change only where it leaves fewer bad faces, so the kept pass never gets
+    // worse; they run here rather than in every pass because they are slower and would change
+    // which regions the next passes split.
+    let mut slides_kept = 0;
+    if nbad > 0 && opts.slide_radius > 0 {
+        let t = Instant::now();
+        if opts.reassign_trials > 0 {
+            let moved = reassign::reassign_bad_faces(
+                topo,
+                &mesh.faces,
+                &mut face_cluster,
+                &pl.planes,
+                &mesh.positions,
+                &mut pl.positions,
+                min_area,
+                &reassign::ReassignOptions {
+                    rounds: 8,
+                    tol: 1e-8 * diag,
+                    max_trials: opts.reassign_trials,
+                    max_slides: opts.slide_repairs,
+                    max_slide_faces: 6,
+                },
+            )?;
+            faces_moved += moved.faces_moved;
+        }
+        slides_kept = slide::slide(
+            topo,
+            &mesh.faces,
+            &face_cluster,
+            &pl.planes,
+            &mesh.positions,
+            &mut pl.positions,
+            min_area,
+            opts.slide_radius,
+        )
+        .kept;
+        times.planarize += t.elapsed().as_secs_f64();
+    }
 
     progress(Stage::Polygons);
     let t = Instant::now();
@@ -535,6 +596,7 @@ pub fn approximate(
         degenerate_faces: degenerate,
         faces_reassigned: reassigned + smoothed,
         fold_moves: faces_moved,
+        slides_kept,
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
         regions_untangled: ut.regions_embedded,

@@ -8,8 +8,10 @@
 //! face (or a face next to it) belongs to changes the outline there, and with it the constraint
 //! set of its corners. So this is a local search with the planes frozen: try moving one face
 //! near a bad face into an edge-adjacent region, put the corners on their new plane sets,
-//! re-space the chains, repair the interior around what is still bad, and keep the move when
-//! the regions it touches have fewer bad faces than before.
+//! re-space the chains, repair the interior around what is still bad (Tutte patches, then, where
+//! those fold — a move often leaves a reflex outline corner next to it — a short run of the
+//! barrier untangler across boundaries, [`super::slide`]), and keep the move when the regions it
+//! touches have fewer bad faces than before.
 //!
 //! A move is only tried when both regions stay locally disk-like (one fan of each around every
 //! corner of the face, so no region is cut in two or pinched at a vertex) and when every corner
@@ -18,9 +20,11 @@
 use super::boundary_l0::project;
 use super::cluster::{regions_at, vertex_clusters};
 use super::geom::{Plane, V3};
+use super::slide::slide_near;
 use super::untangle::{
     bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains,
 };
+use super::untangle2d::Untangle2dOptions;
 use crate::linalg::SolveError;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -31,6 +35,8 @@ pub struct Reassigned {
     pub faces_moved: usize,
     /// Moves tried (each costs a local re-layout).
     pub trials: usize,
+    /// Moves repaired with the barrier untangler (see `max_slides`).
+    pub slides: usize,
 }
 
 /// Options of [`reassign_bad_faces`].
@@ -42,6 +48,10 @@ pub struct ReassignOptions {
     pub tol: f64,
     /// Largest number of moves tried overall (bounds the time on meshes with many folds).
     pub max_trials: usize,
+    /// Largest number of barrier-untangler repairs of a move (each costs far more than a
+    /// Tutte repair), and the most bad faces near a move for which one is run.
+    pub max_slides: usize,
+    pub max_slide_faces: usize,
 }
 
 /// Nearest point to `x` on all `planes` (least squares, then checked): `None` when the planes
@@ -153,7 +163,7 @@ pub fn reassign_bad_faces(
                         input,
                         pos,
                         min_area,
-                        opts.tol,
+                        opts,
                         &on_border,
                         &mut region_faces,
                         g,
@@ -184,7 +194,7 @@ fn try_move(
     input: &[V3],
     pos: &mut [V3],
     min_area: f64,
-    tol: f64,
+    opts: &ReassignOptions,
     on_border: &[bool],
     region_faces: &mut [Vec<usize>],
     g: usize,
@@ -231,7 +241,7 @@ fn try_move(
             .iter()
             .filter_map(|&c| planes[c as usize])
             .collect();
-        match onto_planes(pos[v as usize], &ps, tol) {
+        match onto_planes(pos[v as usize], &ps, opts.tol) {
             Some(y) => pos[v as usize] = y,
             None => {
                 restore(fc, pos);
@@ -258,9 +268,66 @@ fn try_move(
             Some(&scope),
             4,
         )?;
-        bad_faces_among(pos, faces, fc, planes, min_area, &scope).len()
+        let bad = bad_faces_among(pos, faces, fc, planes, min_area, &scope);
+        if bad.len() < before || bad.is_empty() {
+            bad.len()
+        } else {
+            // Tutte patches fold where the region's outline is not convex near the move (a
+            // reflex corner is what many moves create): the barrier untangler across
+            // boundaries is the stronger, slower repair.
+            let quick = Untangle2dOptions {
+                max_rounds: 12,
+                iterations: 100,
+                stall_rounds: 4,
+                ..Untangle2dOptions::default()
+            };
+            // Only the folds next to the move: far ones are not this move's doing.
+            let mut near: Vec<u32> = faces[g].to_vec();
+            for _ in 0..2 {
+                let ring: Vec<u32> = near
+                    .iter()
+                    .flat_map(|&v| topo.neighbors(v).to_vec())
+                    .collect();
+                near.extend(ring);
+                near.sort_unstable();
+                near.dedup();
+            }
+            let local: Vec<usize> = bad
+                .iter()
+                .copied()
+                .filter(|&b| faces[b].iter().any(|v| near.binary_search(v).is_ok()))
+                .collect();
+            if !local.is_empty()
+                && local.len() <= opts.max_slide_faces
+                && out.slides < opts.max_slides
+            {
+                out.slides += 1;
+                slide_near(
+                    topo, faces, fc, planes, &vc, on_border, input, pos, min_area, &local, 3,
+                    &quick,
+                );
+            }
+            bad_faces_among(pos, faces, fc, planes, min_area, &scope).len()
+        }
     };
-    if after < before {
+    // Chains and the barrier repair can move vertices of regions outside `scope`: their faces
+    // count too (`fc` differs from before only at g, which is in `scope`).
+    let mut outside: Vec<usize> = (0..pos.len())
+        .filter(|&v| pos[v] != saved[v])
+        .flat_map(|v| topo.vertex_faces(v as u32).iter().map(|&h| h as usize))
+        .filter(|&h| regions.binary_search(&fc[h]).is_err())
+        .collect();
+    outside.sort_unstable();
+    outside.dedup();
+    let (extra_before, extra_after) = if outside.is_empty() {
+        (0, 0)
+    } else {
+        (
+            bad_faces_among(&saved, faces, fc, planes, min_area, &outside).len(),
+            bad_faces_among(pos, faces, fc, planes, min_area, &outside).len(),
+        )
+    };
+    if after + extra_after < before + extra_before {
         let r = &mut region_faces[from as usize];
         if let Some(i) = r.iter().position(|&h| h == g) {
             r.swap_remove(i);

@@ -83,10 +83,10 @@ fn chi_deriv(d: f64, eps: f64) -> f64 {
     0.5 * (1.0 + d / (eps * eps + d * d).sqrt())
 }
 
-/// Jacobian `[e1 e2] · inv` (row-major) of triangle `f`.
-fn jacobian(f: &[usize; 3], r: &Reference, x: &[[f64; 2]]) -> [f64; 4] {
-    let e1 = [x[f[1]][0] - x[f[0]][0], x[f[1]][1] - x[f[0]][1]];
-    let e2 = [x[f[2]][0] - x[f[0]][0], x[f[2]][1] - x[f[0]][1]];
+/// Jacobian `[e1 e2] · inv` (row-major) of the triangle with corners `q`.
+fn jacobian(q: &[[f64; 2]; 3], r: &Reference) -> [f64; 4] {
+    let e1 = [q[1][0] - q[0][0], q[1][1] - q[0][1]];
+    let e2 = [q[2][0] - q[0][0], q[2][1] - q[0][1]];
     let m = r.inv;
     [
         e1[0] * m[0] + e2[0] * m[2],
@@ -100,6 +100,54 @@ fn det2(j: &[f64; 4]) -> f64 {
     j[0] * j[3] - j[1] * j[2]
 }
 
+/// Jacobian determinant of the triangle `q` against its reference (≤ 0: inverted).
+pub(crate) fn triangle_det(q: &[[f64; 2]; 3], r: &Reference) -> f64 {
+    det2(&jacobian(q, r))
+}
+
+/// Regularised energy of one triangle with corners `q` (see module doc) and, with `grad`, its
+/// gradient with respect to the three corners (overwritten).
+pub(crate) fn triangle_energy(
+    q: &[[f64; 2]; 3],
+    r: &Reference,
+    theta: f64,
+    eps: f64,
+    grad: Option<&mut [[f64; 2]; 3]>,
+) -> f64 {
+    let j = jacobian(q, r);
+    let d = det2(&j);
+    let c = chi(d, eps);
+    let fro = j.iter().map(|v| v * v).sum::<f64>();
+    let a = (1.0 - theta) * 0.5 * fro + theta * 0.5 * (d * d + 1.0);
+    if let Some(g) = grad {
+        let cof = [j[3], -j[2], -j[1], j[0]];
+        let k = -a * chi_deriv(d, eps) / (c * c);
+        let mut gj = [0.0; 4];
+        for i in 0..4 {
+            gj[i] = r.area * (((1.0 - theta) * j[i] + theta * d * cof[i]) / c + k * cof[i]);
+        }
+        // dE/d[e1 e2] = gj · invᵀ
+        let m = r.inv;
+        let ge1 = [gj[0] * m[0] + gj[1] * m[1], gj[2] * m[0] + gj[3] * m[1]];
+        let ge2 = [gj[0] * m[2] + gj[1] * m[3], gj[2] * m[2] + gj[3] * m[3]];
+        for k in 0..2 {
+            g[1][k] = ge1[k];
+            g[2][k] = ge2[k];
+            g[0][k] = -(ge1[k] + ge2[k]);
+        }
+    }
+    r.area * a / c
+}
+
+/// A barrier problem over a flat vector of unknowns, minimised by [`minimise_rounds`].
+pub(crate) trait Barrier {
+    /// Energy at `x` for the regularisation `eps` and (with `grad`) its gradient.
+    fn eval(&self, x: &[f64], eps: f64, grad: Option<&mut [f64]>) -> f64;
+    /// Smallest Jacobian determinant and the number of inverted triangles at `x`.
+    fn min_det(&self, x: &[f64]) -> (f64, usize);
+}
+
+/// The patch problem of [`untangle_2d`]: unknowns are the 2D positions, flattened.
 struct Problem<'a> {
     faces: &'a [[usize; 3]],
     refs: &'a [Reference],
@@ -108,37 +156,32 @@ struct Problem<'a> {
 }
 
 impl Problem<'_> {
+    fn corners(&self, f: &[usize; 3], x: &[[f64; 2]]) -> [[f64; 2]; 3] {
+        f.map(|i| x[i])
+    }
+}
+
+impl Barrier for Problem<'_> {
     /// Energy and (when `grad` is given) its gradient, zero on fixed vertices.
-    fn eval(&self, x: &[[f64; 2]], eps: f64, mut grad: Option<&mut [[f64; 2]]>) -> f64 {
+    fn eval(&self, x: &[f64], eps: f64, grad: Option<&mut [f64]>) -> f64 {
+        let x: &[[f64; 2]] = bytemuck::cast_slice(x);
+        let mut grad: Option<&mut [[f64; 2]]> = grad.map(bytemuck::cast_slice_mut);
         if let Some(g) = grad.as_deref_mut() {
             g.iter_mut().for_each(|v| *v = [0.0; 2]);
         }
-        let th = self.theta;
         let mut e = 0.0;
+        let mut gq = [[0.0; 2]; 3];
         for (f, r) in self.faces.iter().zip(self.refs) {
-            let j = jacobian(f, r, x);
-            let d = det2(&j);
-            let c = chi(d, eps);
-            let fro = j.iter().map(|v| v * v).sum::<f64>();
-            let a = (1.0 - th) * 0.5 * fro + th * 0.5 * (d * d + 1.0);
-            e += r.area * a / c;
-            let Some(g) = grad.as_deref_mut() else {
-                continue;
-            };
-            let cof = [j[3], -j[2], -j[1], j[0]];
-            let k = -a * chi_deriv(d, eps) / (c * c);
-            let mut gj = [0.0; 4];
-            for i in 0..4 {
-                gj[i] = r.area * (((1.0 - th) * j[i] + th * d * cof[i]) / c + k * cof[i]);
-            }
-            // dE/d[e1 e2] = gj · invᵀ
-            let m = r.inv;
-            let ge1 = [gj[0] * m[0] + gj[1] * m[1], gj[2] * m[0] + gj[3] * m[1]];
-            let ge2 = [gj[0] * m[2] + gj[1] * m[3], gj[2] * m[2] + gj[3] * m[3]];
-            for k in 0..2 {
-                g[f[1]][k] += ge1[k];
-                g[f[2]][k] += ge2[k];
-                g[f[0]][k] -= ge1[k] + ge2[k];
+            let q = self.corners(f, x);
+            match grad.as_deref_mut() {
+                Some(g) => {
+                    e += triangle_energy(&q, r, self.theta, eps, Some(&mut gq));
+                    for (c, &i) in f.iter().enumerate() {
+                        g[i][0] += gq[c][0];
+                        g[i][1] += gq[c][1];
+                    }
+                }
+                None => e += triangle_energy(&q, r, self.theta, eps, None),
             }
         }
         if let Some(g) = grad {
@@ -151,11 +194,12 @@ impl Problem<'_> {
         e
     }
 
-    fn min_det(&self, x: &[[f64; 2]]) -> (f64, usize) {
+    fn min_det(&self, x: &[f64]) -> (f64, usize) {
+        let x: &[[f64; 2]] = bytemuck::cast_slice(x);
         let mut m = f64::INFINITY;
         let mut inv = 0;
         for (f, r) in self.faces.iter().zip(self.refs) {
-            let d = det2(&jacobian(f, r, x));
+            let d = triangle_det(&self.corners(f, x), r);
             m = m.min(d);
             inv += usize::from(d <= 0.0);
         }
@@ -163,25 +207,27 @@ impl Problem<'_> {
     }
 }
 
-fn dotv(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(p, q)| p[0] * q[0] + p[1] * q[1])
+/// Dot product, summed in pairs: the order of the 2D untangler's sums before it was written
+/// over flat vectors, kept so that its results stay bit-identical.
+fn dotv(a: &[f64], b: &[f64]) -> f64 {
+    a.chunks(2)
+        .zip(b.chunks(2))
+        .map(|(p, q)| p.iter().zip(q).map(|(x, y)| x * y).sum::<f64>())
         .sum()
 }
 
 /// One L-BFGS memory entry: step s, gradient change y, 1/(s·y).
-type Pair = (Vec<[f64; 2]>, Vec<[f64; 2]>, f64);
+type Pair = (Vec<f64>, Vec<f64>, f64);
 
 /// L-BFGS (memory 8) with backtracking Armijo steps; returns the final energy.
-fn lbfgs(p: &Problem, x: &mut [[f64; 2]], eps: f64, iterations: usize) -> f64 {
+fn lbfgs(p: &dyn Barrier, x: &mut [f64], eps: f64, iterations: usize) -> f64 {
     const MEM: usize = 8;
     let n = x.len();
-    let mut g = vec![[0.0; 2]; n];
+    let mut g = vec![0.0; n];
     let mut e = p.eval(x, eps, Some(&mut g));
     let mut hist: Vec<Pair> = Vec::new();
-    let mut xn = vec![[0.0; 2]; n];
-    let mut gn = vec![[0.0; 2]; n];
+    let mut xn = vec![0.0; n];
+    let mut gn = vec![0.0; n];
     for _ in 0..iterations {
         let gg = dotv(&g, &g);
         if gg.sqrt() <= 1e-12 * (1.0 + e.abs()) || !e.is_finite() {
@@ -192,48 +238,36 @@ fn lbfgs(p: &Problem, x: &mut [[f64; 2]], eps: f64, iterations: usize) -> f64 {
         let mut alphas = Vec::with_capacity(hist.len());
         for (s, y, rho) in hist.iter().rev() {
             let a = rho * dotv(s, &q);
-            for (qi, yi) in q.iter_mut().zip(y) {
-                qi[0] -= a * yi[0];
-                qi[1] -= a * yi[1];
-            }
+            q.iter_mut().zip(y).for_each(|(qi, yi)| *qi -= a * yi);
             alphas.push(a);
         }
-        if let Some((s, y, _)) = hist.last() {
-            let gamma = dotv(s, y) / dotv(y, y);
-            q.iter_mut().for_each(|v| *v = [v[0] * gamma, v[1] * gamma]);
-        } else {
-            let sc = 1.0 / gg.sqrt().max(1e-300);
-            q.iter_mut().for_each(|v| *v = [v[0] * sc, v[1] * sc]);
-        }
+        let sc = match hist.last() {
+            Some((s, y, _)) => dotv(s, y) / dotv(y, y),
+            None => 1.0 / gg.sqrt().max(1e-300),
+        };
+        q.iter_mut().for_each(|v| *v *= sc);
         for ((s, y, rho), a) in hist.iter().zip(alphas.iter().rev()) {
             let b = rho * dotv(y, &q);
-            for (qi, si) in q.iter_mut().zip(s) {
-                qi[0] += (a - b) * si[0];
-                qi[1] += (a - b) * si[1];
-            }
+            q.iter_mut().zip(s).for_each(|(qi, si)| *qi += (a - b) * si);
         }
         let mut slope = -dotv(&g, &q);
         if slope >= 0.0 {
             // Not a descent direction: fall back to steepest descent.
             hist.clear();
             let sc = 1.0 / gg.sqrt();
-            q = g.iter().map(|v| [v[0] * sc, v[1] * sc]).collect();
+            q = g.iter().map(|v| v * sc).collect();
             slope = -dotv(&g, &q);
         }
         let mut t = 1.0;
         let mut accepted = false;
         for _ in 0..40 {
             for i in 0..n {
-                xn[i] = [x[i][0] - t * q[i][0], x[i][1] - t * q[i][1]];
+                xn[i] = x[i] - t * q[i];
             }
             let en = p.eval(&xn, eps, Some(&mut gn));
             if en.is_finite() && en <= e + 1e-4 * t * slope {
-                let s: Vec<[f64; 2]> = (0..n)
-                    .map(|i| [xn[i][0] - x[i][0], xn[i][1] - x[i][1]])
-                    .collect();
-                let y: Vec<[f64; 2]> = (0..n)
-                    .map(|i| [gn[i][0] - g[i][0], gn[i][1] - g[i][1]])
-                    .collect();
+                let s: Vec<f64> = (0..n).map(|i| xn[i] - x[i]).collect();
+                let y: Vec<f64> = (0..n).map(|i| gn[i] - g[i]).collect();
                 let sy = dotv(&s, &y);
                 if sy > 1e-300 {
                     if hist.len() == MEM {
@@ -276,6 +310,16 @@ pub fn untangle_2d(
         free,
         theta: opts.theta,
     };
+    minimise_rounds(&p, bytemuck::cast_slice_mut(x), opts)
+}
+
+/// The rounds of "L-BFGS, lower ε" of Garanzha et al. on any [`Barrier`] problem. Returns the
+/// iterate with the fewest inverted triangles seen (in `x`).
+pub(crate) fn minimise_rounds(
+    p: &dyn Barrier,
+    x: &mut [f64],
+    opts: &Untangle2dOptions,
+) -> Untangle2dResult {
     let (mut min_det, mut inverted) = p.min_det(x);
     let mut eps = if min_det > 0.0 {
         1e-10
@@ -291,7 +335,7 @@ pub fn untangle_2d(
     let mut since_best = 0;
     while rounds < opts.max_rounds && since_best < opts.stall_rounds {
         rounds += 1;
-        let e = lbfgs(&p, x, eps, opts.iterations);
+        let e = lbfgs(p, x, eps, opts.iterations);
         (min_det, inverted) = p.min_det(x);
         if inverted < best.0 {
             best = (inverted, x.to_vec());
@@ -349,7 +393,7 @@ mod tests {
             free: &free,
             theta: 1.0 / 128.0,
         }
-        .min_det(&x)
+        .min_det(bytemuck::cast_slice(&x))
         .1;
         assert!(before > 0);
         let r = untangle_2d(&faces, &refs, &free, &mut x, &Untangle2dOptions::default());
@@ -376,7 +420,11 @@ mod tests {
             theta: 0.2,
         };
         let mut g = vec![[0.0; 2]; 5];
-        p.eval(&x, 0.3, Some(&mut g));
+        p.eval(
+            bytemuck::cast_slice(&x),
+            0.3,
+            Some(bytemuck::cast_slice_mut(&mut g)),
+        );
         let h = 1e-6;
         for v in 0..5 {
             for k in 0..2 {
@@ -384,7 +432,8 @@ mod tests {
                 let mut xm = x.clone();
                 xp[v][k] += h;
                 xm[v][k] -= h;
-                let fd = (p.eval(&xp, 0.3, None) - p.eval(&xm, 0.3, None)) / (2.0 * h);
+                let e = |y: &Vec<[f64; 2]>| p.eval(bytemuck::cast_slice(y), 0.3, None);
+                let fd = (e(&xp) - e(&xm)) / (2.0 * h);
                 assert!((fd - g[v][k]).abs() < 1e-5 * (1.0 + fd.abs()), "{v} {k}");
             }
         }
