@@ -197,7 +197,10 @@ fn neighbourhoods(
 }
 
 /// Moves the vertices within `radius` rings of each bad face inside their constraint sets (see
-/// module doc); `input` gives the reference shapes. Planes and regions do not change.
+/// module doc); `input` gives the reference shapes. Planes and regions do not change. The
+/// barrier runs are short (20 rounds of 100 L-BFGS iterations, ending after 4 without
+/// progress): on the acceptance runs the default budget fixed no more faces, and a hopeless
+/// neighbourhood (faces on fixed corners) would spend all of it.
 #[allow(clippy::too_many_arguments)]
 pub fn slide(
     topo: &Topology,
@@ -227,7 +230,12 @@ pub fn slide(
         min_area,
         &bad,
         radius,
-        &Untangle2dOptions::default(),
+        &Untangle2dOptions {
+            max_rounds: 20,
+            iterations: 100,
+            stall_rounds: 4,
+            ..Untangle2dOptions::default()
+        },
     )
 }
 
