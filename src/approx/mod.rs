@@ -104,7 +104,8 @@ pub struct ApproxOptions {
     /// removes (see [`reassign`]); 0 = off.
     pub reassign_trials: usize,
     /// Rings around each fold within which vertices slide along their planes and plane–plane
-    /// lines, across region boundaries (see [`slide`]); 0 = off.
+    /// lines, across region boundaries (see [`slide`]); 0 = off, and with it the second round
+    /// of fold moves on the kept pass.
     pub slide_radius: usize,
     /// Largest number of fold moves on the kept pass repaired by that barrier untangler.
     pub slide_repairs: usize,

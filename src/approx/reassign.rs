@@ -11,7 +11,9 @@
 //! re-space the chains, repair the interior around what is still bad (Tutte patches, then, where
 //! those fold — a move often leaves a reflex outline corner next to it — a short run of the
 //! barrier untangler across boundaries, [`super::slide`]), and keep the move when the regions it
-//! touches have fewer bad faces than before.
+//! touches, plus every face around a vertex that moved, have fewer bad faces than before (chain
+//! re-spacing and the repairs can reach past those regions; counting only them let moves add
+//! folds elsewhere).
 //!
 //! A move is only tried when both regions stay locally disk-like (one fan of each around every
 //! corner of the face, so no region is cut in two or pinched at a vertex) and when every corner

@@ -12,42 +12,12 @@
 //! Moves are kept per neighbourhood only when that neighbourhood has fewer bad faces afterwards.
 
 use super::cluster::vertex_clusters;
-use super::geom::{add, cross, dot, norm, normalize, scale, sub, Plane, V3};
+use super::geom::{add, cross, dot, norm, scale, sub, Frame, Plane, V3};
 use super::untangle::{bad_faces, bad_faces_among, border_vertices};
 use super::untangle2d::{
     minimise_rounds, triangle_det, triangle_energy, Barrier, Reference, Untangle2dOptions,
 };
 use crate::mesh::Topology;
-
-/// A region's plane frame: origin on the plane and two orthonormal in-plane axes.
-#[derive(Clone, Copy)]
-struct Frame {
-    o: V3,
-    u: V3,
-    v: V3,
-}
-
-impl Frame {
-    fn of(p: &Plane) -> Option<Frame> {
-        let n = p.n;
-        let axis = if n[0].abs() < 0.6 {
-            [1.0, 0.0, 0.0]
-        } else {
-            [0.0, 1.0, 0.0]
-        };
-        let u = normalize(cross(n, axis))?;
-        Some(Frame {
-            o: scale(n, -p.d),
-            u,
-            v: cross(n, u),
-        })
-    }
-
-    fn coords(&self, x: V3) -> [f64; 2] {
-        let q = sub(x, self.o);
-        [dot(q, self.u), dot(q, self.v)]
-    }
-}
 
 /// A moving vertex: its start position and the 3D directions of its one or two unknowns.
 struct Mover {

@@ -21,7 +21,7 @@ use sprs::TriMat;
 
 use super::cluster::vertex_clusters;
 use super::geom::{
-    add, cross, dot, face_area_normal, face_normals_areas, norm, normalize, scale, sub, Plane, V3,
+    add, cross, dot, face_area_normal, face_normals_areas, norm, scale, sub, Frame, Plane, V3,
 };
 use super::sparse::solve_spd;
 use super::untangle2d::{untangle_2d, Reference, Untangle2dOptions};
@@ -302,17 +302,9 @@ fn untangle_region(
     input: &[V3],
     pos: &mut [V3],
 ) {
-    let n = p.n;
-    let axis = if n[0].abs() < 0.6 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
-    let Some(u) = normalize(cross(n, axis)) else {
+    let Some(frame) = Frame::of(p) else {
         return;
     };
-    let v = cross(n, u);
-    let origin = scale(n, -p.d);
     let mut local = std::collections::HashMap::new();
     let mut global = Vec::new();
     let lf: Vec<[usize; 3]> = rf
@@ -326,13 +318,7 @@ fn untangle_region(
             })
         })
         .collect();
-    let mut x: Vec<[f64; 2]> = global
-        .iter()
-        .map(|&g| {
-            let q = sub(pos[g], origin);
-            [dot(q, u), dot(q, v)]
-        })
-        .collect();
+    let mut x: Vec<[f64; 2]> = global.iter().map(|&g| frame.coords(pos[g])).collect();
     let signed: f64 = lf
         .iter()
         .map(|f| {
@@ -363,7 +349,7 @@ fn untangle_region(
     untangle_2d(&lf, &refs, &free, &mut x, &Untangle2dOptions::default());
     for (i, &g) in global.iter().enumerate() {
         if free[i] {
-            pos[g] = add(origin, add(scale(u, x[i][0]), scale(v, x[i][1])));
+            pos[g] = frame.point(x[i]);
         }
     }
 }
