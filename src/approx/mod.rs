@@ -360,6 +360,26 @@ pub fn approximate(
     let mut faces_moved = 0;
     let mut n_clusters = n_clusters;
     let (mut split_passes, mut regions_split) = (0, 0);
+    // Fold moves (see [`reassign`]), with at most `max_slides` of them repaired by the barrier
+    // untangler.
+    let fold_moves = |fc: &mut [u32], pl: &mut boundary_l0::Planarized, max_slides: usize| {
+        reassign::reassign_bad_faces(
+            topo,
+            &mesh.faces,
+            fc,
+            &pl.planes,
+            &mesh.positions,
+            &mut pl.positions,
+            min_area,
+            &reassign::ReassignOptions {
+                rounds: 8,
+                tol: 1e-8 * diag,
+                max_trials: opts.reassign_trials,
+                max_slides,
+                max_slide_faces: 6,
+            },
+        )
+    };
     loop {
         progress(Stage::Vertices);
         let t = Instant::now();
@@ -393,23 +413,8 @@ pub fn approximate(
             min_area,
         )?;
         let moved = if opts.reassign_trials > 0 {
-            reassign::reassign_bad_faces(
-                topo,
-                &mesh.faces,
-                &mut face_cluster,
-                &pl.planes,
-                &mesh.positions,
-                &mut pl.positions,
-                min_area,
-                &reassign::ReassignOptions {
-                    rounds: 8,
-                    tol: 1e-8 * diag,
-                    max_trials: opts.reassign_trials,
-                    // The barrier repair of moves is kept for the final pass (below).
-                    max_slides: 0,
-                    max_slide_faces: 0,
-                },
-            )?
+            // The barrier repair of moves is kept for the final pass (below).
+            fold_moves(&mut face_cluster, &mut pl, 0)?
         } else {
             reassign::Reassigned::default()
         };
@@ -485,22 +490,7 @@ pub fn approximate(
     if nbad > 0 && opts.slide_radius > 0 {
         let t = Instant::now();
         if opts.reassign_trials > 0 {
-            let moved = reassign::reassign_bad_faces(
-                topo,
-                &mesh.faces,
-                &mut face_cluster,
-                &pl.planes,
-                &mesh.positions,
-                &mut pl.positions,
-                min_area,
-                &reassign::ReassignOptions {
-                    rounds: 8,
-                    tol: 1e-8 * diag,
-                    max_trials: opts.reassign_trials,
-                    max_slides: opts.slide_repairs,
-                    max_slide_faces: 6,
-                },
-            )?;
+            let moved = fold_moves(&mut face_cluster, &mut pl, opts.slide_repairs)?;
             faces_moved += moved.faces_moved;
         }
         slides_kept = slide::slide(

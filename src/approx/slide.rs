@@ -353,6 +353,12 @@ mod tests {
     use super::*;
     use crate::mesh::{Topology, TriMesh};
 
+    /// The planes of the test "books": page A in z = 0 seen from +z, page B in y = 0 from +y.
+    fn book_planes() -> Vec<Option<Plane>> {
+        let p = |n: V3| Some(Plane { n, d: 0.0 });
+        vec![p([0.0, 0.0, 1.0]), p([0.0, 1.0, 0.0])]
+    }
+
     /// Two square regions meeting at a right angle along the x axis (a "book" of two pages,
     /// each a fan of 4 triangles around an interior vertex). The shared chain's middle vertex is
     /// pushed past its end along the crease line, which flips faces of both pages; neither
@@ -392,16 +398,7 @@ mod tests {
         };
         let topo = Topology::build(&mesh, std::path::Path::new("book")).unwrap();
         let fc = vec![0, 0, 0, 0, 0, 1, 1, 1, 1, 1];
-        let planes = vec![
-            Some(Plane {
-                n: [0.0, 0.0, 1.0],
-                d: 0.0,
-            }),
-            Some(Plane {
-                n: [0.0, 1.0, 0.0],
-                d: 0.0,
-            }),
-        ];
+        let planes = book_planes();
         let mut pos = positions.clone();
         pos[1] = [2.6, 0.0, 0.0];
         let min_area = 1e-12;
@@ -467,16 +464,7 @@ mod tests {
                 }
             }
         }
-        let planes = vec![
-            Some(Plane {
-                n: [0.0, 0.0, 1.0],
-                d: 0.0,
-            }),
-            Some(Plane {
-                n: [0.0, 1.0, 0.0],
-                d: 0.0,
-            }),
-        ];
+        let planes = book_planes();
         (pos, faces, fc, planes)
     }
 
