@@ -24,7 +24,7 @@ use super::cluster::{regions_at, vertex_clusters};
 use super::geom::{Plane, V3};
 use super::slide::slide_near;
 use super::untangle::{
-    bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains,
+    bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains, Layout,
 };
 use super::untangle2d::Untangle2dOptions;
 use crate::linalg::SolveError;
@@ -254,22 +254,20 @@ fn try_move(
     let vc = vertex_clusters(topo, fc);
     respace_chains(topo, fc, &vc, on_border, input, pos);
     let bad = bad_faces_among(pos, faces, fc, planes, min_area, &scope);
+    let layout = Layout {
+        topo,
+        faces,
+        fc,
+        planes,
+        vc: &vc,
+        on_border,
+        input,
+        min_area,
+    };
     let after = if bad.len() < before {
         bad.len()
     } else {
-        repair_patches(
-            topo,
-            faces,
-            fc,
-            planes,
-            &vc,
-            on_border,
-            pos,
-            min_area,
-            bad,
-            Some(&scope),
-            4,
-        )?;
+        repair_patches(&layout, pos, bad, Some(&scope), 4)?;
         let bad = bad_faces_among(pos, faces, fc, planes, min_area, &scope);
         if bad.len() < before || bad.is_empty() {
             bad.len()
@@ -304,10 +302,7 @@ fn try_move(
                 && out.slides < opts.max_slides
             {
                 out.slides += 1;
-                slide_near(
-                    topo, faces, fc, planes, &vc, on_border, input, pos, min_area, &local, 3,
-                    &quick,
-                );
+                slide_near(&layout, pos, &local, 3, &quick);
             }
             bad_faces_among(pos, faces, fc, planes, min_area, &scope).len()
         }

@@ -13,7 +13,7 @@
 
 use super::cluster::vertex_clusters;
 use super::geom::{add, cross, dot, norm, scale, sub, Frame, Plane, V3};
-use super::untangle::{bad_faces, bad_faces_among, border_vertices};
+use super::untangle::{bad_faces, bad_faces_among, border_vertices, Layout};
 use super::untangle2d::{
     minimise_rounds, triangle_det, triangle_energy, Barrier, Reference, Untangle2dOptions,
 };
@@ -188,16 +188,19 @@ pub fn slide(
     }
     let vc = vertex_clusters(topo, fc);
     let on_border = border_vertices(topo);
-    slide_near(
+    let layout = Layout {
         topo,
         faces,
         fc,
         planes,
-        &vc,
-        &on_border,
+        vc: &vc,
+        on_border: &on_border,
         input,
-        pos,
         min_area,
+    };
+    slide_near(
+        &layout,
+        pos,
         &bad,
         radius,
         &Untangle2dOptions {
@@ -209,23 +212,24 @@ pub fn slide(
     )
 }
 
-/// [`slide`] around the given `bad` faces, with the vertices' region sets `vc` and mesh-border
-/// flags already known.
-#[allow(clippy::too_many_arguments)]
+/// [`slide`] around the given `bad` faces of `layout`.
 pub(crate) fn slide_near(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    fc: &[u32],
-    planes: &[Option<Plane>],
-    vc: &[Vec<u32>],
-    on_border: &[bool],
-    input: &[V3],
+    layout: &Layout,
     pos: &mut [V3],
-    min_area: f64,
     bad: &[usize],
     radius: usize,
     opts: &Untangle2dOptions,
 ) -> Slid {
+    let Layout {
+        topo,
+        faces,
+        fc,
+        planes,
+        vc,
+        on_border,
+        input,
+        min_area,
+    } = *layout;
     let mut out = Slid::default();
     let frames: Vec<Option<Frame>> = planes
         .iter()

@@ -38,6 +38,21 @@ pub struct Untangled {
     pub regions_embedded: usize,
 }
 
+/// What the fold repairs read and do not change: the mesh, its regions and their planes, each
+/// vertex's sorted regions, the mesh-border flags, the input positions (reference shapes and
+/// arc lengths) and the area at or below which a face counts as degenerate.
+#[derive(Clone, Copy)]
+pub(crate) struct Layout<'a> {
+    pub topo: &'a Topology,
+    pub faces: &'a [[u32; 3]],
+    pub fc: &'a [u32],
+    pub planes: &'a [Option<Plane>],
+    pub vc: &'a [Vec<u32>],
+    pub on_border: &'a [bool],
+    pub input: &'a [V3],
+    pub min_area: f64,
+}
+
 /// Re-spaces two-region chains and repairs folds locally (see module doc).
 /// `input` are the input positions (for arc-length fractions).
 pub fn untangle(
@@ -56,12 +71,18 @@ pub fn untangle(
         ..Untangled::default()
     };
     let bad = bad_faces(pos, faces, fc, planes, min_area);
-    out.patches_embedded = repair_patches(
-        topo, faces, fc, planes, &vc, &on_border, pos, min_area, bad, None, 64,
-    )?;
-    out.regions_embedded = embed_folded_regions(
-        topo, faces, fc, planes, &vc, &on_border, input, pos, min_area,
-    )?;
+    let layout = Layout {
+        topo,
+        faces,
+        fc,
+        planes,
+        vc: &vc,
+        on_border: &on_border,
+        input,
+        min_area,
+    };
+    out.patches_embedded = repair_patches(&layout, pos, bad, None, 64)?;
+    out.regions_embedded = embed_folded_regions(&layout, pos)?;
     Ok(out)
 }
 
@@ -156,20 +177,23 @@ pub(crate) fn respace_chains(
 /// Local Tutte repair in patches of growing radius around the `bad` faces (see module doc).
 /// With `scope`, only bad faces among those faces are looked at and counted (the caller knows
 /// nothing else moved). Returns the repairs kept.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn repair_patches(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    fc: &[u32],
-    planes: &[Option<Plane>],
-    vc: &[Vec<u32>],
-    on_border: &[bool],
+    layout: &Layout,
     pos: &mut [V3],
-    min_area: f64,
     mut bad: Vec<usize>,
     scope: Option<&[usize]>,
     max_radius: usize,
 ) -> Result<usize, SolveError> {
+    let Layout {
+        topo,
+        faces,
+        fc,
+        planes,
+        vc,
+        on_border,
+        min_area,
+        ..
+    } = *layout;
     let n = topo.n_vertices;
     let count = |pos: &[V3]| match scope {
         Some(s) => bad_faces_among(pos, faces, fc, planes, min_area, s),
@@ -229,18 +253,17 @@ pub(crate) fn repair_patches(
 /// faces, so each region is decided on its own: the embedding is kept when that region ends up
 /// with fewer bad faces (it is fold-free whenever the region's boundary, seen in its plane, is a
 /// convex polygon, and usually when it is a simple one). Returns the regions changed.
-#[allow(clippy::too_many_arguments)]
-fn embed_folded_regions(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    fc: &[u32],
-    planes: &[Option<Plane>],
-    vc: &[Vec<u32>],
-    on_border: &[bool],
-    input: &[V3],
-    pos: &mut [V3],
-    min_area: f64,
-) -> Result<usize, SolveError> {
+fn embed_folded_regions(layout: &Layout, pos: &mut [V3]) -> Result<usize, SolveError> {
+    let Layout {
+        topo,
+        faces,
+        fc,
+        planes,
+        vc,
+        on_border,
+        input,
+        min_area,
+    } = *layout;
     let n_regions = planes.len();
     let mut region_faces: Vec<Vec<usize>> = vec![Vec::new(); n_regions];
     for (f, &c) in fc.iter().enumerate() {
