@@ -16,15 +16,19 @@
 //!    neighbouring region with the planes frozen ([`reassign`]); regions that still fold are
 //!    split in two with unused budget (< K regions) and stage 4 rerun, keeping the pass with
 //!    the fewest bad faces; on that pass, vertices near the folds left slide along their
-//!    planes and plane–plane lines across region boundaries ([`slide`]);
+//!    planes and plane–plane lines across region boundaries ([`slide`]), then single planes
+//!    are tilted or shifted to move misplaced corners ([`nudge`]) and small regions that still
+//!    fold are given to their neighbours ([`dissolve`]);
 //! 5. [`polygons`]: one polygon per region, corners where boundaries meet or turn.
 #![forbid(unsafe_code)]
 
 pub mod boundary_l0;
 pub mod cluster;
+pub mod dissolve;
 pub mod geom;
 pub mod lloyd;
 pub mod normals_l0;
+pub mod nudge;
 pub mod polygons;
 pub mod reassign;
 pub mod slide;
@@ -109,6 +113,12 @@ pub struct ApproxOptions {
     pub slide_radius: usize,
     /// Largest number of fold moves on the kept pass repaired by that barrier untangler.
     pub slide_repairs: usize,
+    /// Largest region (faces) that may be dissolved into its neighbours when it still folds
+    /// at the end (see [`dissolve`]); 0 = off.
+    pub dissolve_max_faces: usize,
+    /// Largest number of plane tilts and shifts tried at the end against the folds left (see
+    /// [`nudge`]); 0 = off.
+    pub nudge_trials: usize,
     pub boundary: BoundaryL0Options,
 }
 
@@ -124,6 +134,8 @@ impl ApproxOptions {
             reassign_trials: 4000,
             slide_radius: 3,
             slide_repairs: 400,
+            dissolve_max_faces: 200,
+            nudge_trials: 2000,
             max_split_passes: 4,
             split_per_pass: 1,
             corner_reach_rel: 0.04,
@@ -216,6 +228,10 @@ pub struct ApproxReport {
     /// Neighbourhoods of folds where sliding vertices across region boundaries removed bad
     /// faces (see [`slide`]), on the kept pass.
     pub slides_kept: usize,
+    /// Regions dissolved into their neighbours at the end (see [`dissolve`]).
+    pub regions_dissolved: usize,
+    /// Planes tilted or shifted at the end to move corners apart (see [`nudge`]).
+    pub planes_nudged: usize,
     /// Two-region boundary chains re-spaced monotonically along their line.
     pub chains_respaced: usize,
     /// Local Tutte repairs run to remove folds.
@@ -506,6 +522,70 @@ pub fn approximate(
         .kept;
         times.planarize += t.elapsed().as_secs_f64();
     }
+    // Then the planes themselves ([`nudge`]) and the small regions that still fold
+    // ([`dissolve`]), alternately while they remove folds: a dissolved region changes the
+    // outlines the planes must meet, a nudged plane the corners a dissolve must reach. Both
+    // keep a change only where it leaves fewer bad faces. Skipped above `END_REPAIR_MAX_BAD`:
+    // that many folds come from the partition itself (block 24 keeps its 70 through 2 000
+    // trials) and each trial costs a local repair.
+    let (mut nudged, mut dissolved) = (0, 0);
+    let mut n_clusters = n_clusters;
+    let count_bad = |pl: &boundary_l0::Planarized, fc: &[u32]| {
+        untangle::bad_faces(&pl.positions, &mesh.faces, fc, &pl.planes, min_area).len()
+    };
+    let mut trials_left = opts.nudge_trials;
+    for _ in 0..3 {
+        let before = count_bad(&pl, &face_cluster);
+        if before == 0 || before > END_REPAIR_MAX_BAD {
+            break;
+        }
+        let t = Instant::now();
+        if trials_left > 0 {
+            let r = nudge::nudge_planes(
+                topo,
+                &mesh.faces,
+                &face_cluster,
+                &mut pl.planes,
+                &mesh.positions,
+                &mut pl.positions,
+                min_area,
+                &nudge::NudgeOptions {
+                    angles: vec![0.005, 0.01, 0.02, 0.04, 0.08, 0.16, 0.3],
+                    shifts: vec![0.001, 0.003, 0.01, 0.02, 0.04, 0.08],
+                    tol: 1e-8 * diag,
+                    max_trials: trials_left,
+                    rounds: 8,
+                    slide_excess: 0,
+                },
+            )?;
+            trials_left = trials_left.saturating_sub(r.trials);
+            nudged += r.kept;
+        }
+        if opts.dissolve_max_faces > 0 && count_bad(&pl, &face_cluster) > 0 {
+            let d = dissolve::dissolve_folded_regions(
+                topo,
+                &mesh.faces,
+                &mut face_cluster,
+                &pl.planes,
+                &mesh.positions,
+                &mut pl.positions,
+                min_area,
+                &dissolve::DissolveOptions {
+                    max_faces: opts.dissolve_max_faces,
+                    tol: 1e-8 * diag,
+                    max_trials: 32,
+                },
+            )?;
+            if d > 0 {
+                n_clusters = renumber_with_planes(&mut face_cluster, &mut pl.planes);
+            }
+            dissolved += d;
+        }
+        times.planarize += t.elapsed().as_secs_f64();
+        if count_bad(&pl, &face_cluster) >= before {
+            break;
+        }
+    }
 
     progress(Stage::Polygons);
     let t = Instant::now();
@@ -588,6 +668,8 @@ pub fn approximate(
         faces_reassigned: reassigned + smoothed,
         fold_moves: faces_moved,
         slides_kept,
+        regions_dissolved: dissolved,
+        planes_nudged: nudged,
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
         regions_untangled: ut.regions_embedded,
@@ -619,6 +701,9 @@ pub fn approximate(
     })
 }
 
+/// Most bad faces left for which the plane nudges and region dissolves run (see `approximate`).
+const END_REPAIR_MAX_BAD: usize = 64;
+
 /// Renumbers region labels to 0..count in order of first appearance (drops emptied regions).
 fn renumber(labels: &mut [u32]) -> usize {
     let mut map = std::collections::HashMap::new();
@@ -626,6 +711,21 @@ fn renumber(labels: &mut [u32]) -> usize {
         let next = map.len() as u32;
         *l = *map.entry(*l).or_insert(next);
     }
+    map.len()
+}
+
+/// [`renumber`], carrying each region's plane along (emptied regions and their planes go).
+fn renumber_with_planes(labels: &mut [u32], planes: &mut Vec<Option<Plane>>) -> usize {
+    let mut order: Vec<u32> = Vec::new();
+    let mut map = std::collections::HashMap::new();
+    for l in labels.iter_mut() {
+        let next = map.len() as u32;
+        *l = *map.entry(*l).or_insert_with(|| {
+            order.push(*l);
+            next
+        });
+    }
+    *planes = order.iter().map(|&c| planes[c as usize]).collect();
     map.len()
 }
 

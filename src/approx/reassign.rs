@@ -58,7 +58,7 @@ pub struct ReassignOptions {
 
 /// Nearest point to `x` on all `planes` (least squares, then checked): `None` when the planes
 /// have no common point within `tol` or do not pin enough down to be solved stably.
-fn onto_planes(x: V3, planes: &[Plane], tol: f64) -> Option<V3> {
+pub(super) fn onto_planes(x: V3, planes: &[Plane], tol: f64) -> Option<V3> {
     // A tiny ridge keeps the directions the planes leave free at x.
     let y = project(x, planes, 1e-12)?;
     planes
@@ -70,7 +70,12 @@ fn onto_planes(x: V3, planes: &[Plane], tol: f64) -> Option<V3> {
 /// Number of contiguous fans of faces satisfying `inside` around vertex `v` (0 when none;
 /// 1 when all). Each fan ends where the edge leaving `v` in face order leads to a face outside
 /// (or to no face: the mesh border). Needs consistently oriented faces (validated input).
-fn fans(topo: &Topology, faces: &[[u32; 3]], v: u32, inside: &dyn Fn(usize) -> bool) -> usize {
+pub(super) fn fans(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    v: u32,
+    inside: &dyn Fn(usize) -> bool,
+) -> usize {
     let vf = topo.vertex_faces(v);
     let mut ends = 0;
     let mut all = true;

@@ -353,7 +353,7 @@ pub(crate) fn slide_near(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::mesh::{Topology, TriMesh};
 
@@ -424,10 +424,10 @@ mod tests {
     }
 
     /// Positions, faces, face regions and region planes of a test layout.
-    type Book = (Vec<V3>, Vec<[u32; 3]>, Vec<u32>, Vec<Option<Plane>>);
+    pub(crate) type Book = (Vec<V3>, Vec<[u32; 3]>, Vec<u32>, Vec<Option<Plane>>);
 
     /// A "book" of two n×n grid pages meeting at a right angle along the x axis.
-    fn grid_book(n: usize) -> Book {
+    pub(crate) fn grid_book(n: usize) -> Book {
         let mut pos = Vec::new();
         // Row j = 0 is the shared spine; page A rows go +y (z = 0), page B rows go +z (y = 0).
         for i in 0..=n {

@@ -1,0 +1,386 @@
+//! Dissolves small regions that fold into their neighbours.
+//!
+//! The one-face moves of [`super::reassign`] change an outline by one triangle; what they leave
+//! are mostly small, thin regions squeezed between their neighbours' planes (the outline of
+//! such a region overlaps itself in its plane, so no placement of its vertices is fold-free).
+//! Giving every face of the region to a neighbour removes that plane altogether: the faces are
+//! handed out by region growing from the outline, each to the adjacent neighbour whose plane
+//! normal is closest to the face's input normal, the region's vertices go onto their new plane
+//! sets, and the folds around are repaired as for a face move (chain re-spacing, Tutte patches,
+//! the barrier untangler). The change is kept only when the faces of every region around the
+//! dissolved one, plus every face around a vertex that moved, have fewer bad faces than before.
+//! Planes stay as they are; the dissolved region is left empty (one region fewer, so never more
+//! than K).
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use super::cluster::{regions_at, vertex_clusters};
+use super::geom::{dot, face_area_normal, normalize, Plane, V3};
+use super::reassign::{fans, onto_planes};
+use super::slide::slide_near;
+use super::untangle::{
+    bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains, Layout,
+};
+use super::untangle2d::Untangle2dOptions;
+use crate::linalg::SolveError;
+use crate::mesh::{Topology, NO_FACE};
+
+/// Options of [`dissolve_folded_regions`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DissolveOptions {
+    /// Largest region (faces) tried: big regions carry most of the approximation, and losing
+    /// one costs far more error than its folds are worth.
+    pub max_faces: usize,
+    /// Largest distance of a vertex to any of its new planes (absolute).
+    pub tol: f64,
+    /// Largest number of regions tried.
+    pub max_trials: usize,
+}
+
+/// Tries to dissolve every region with bad faces of at most `opts.max_faces` faces, fewest
+/// faces first; returns how many were dissolved. `fc` and `pos` change in place; dissolved
+/// regions are left empty (renumber afterwards).
+#[allow(clippy::too_many_arguments)]
+pub fn dissolve_folded_regions(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    opts: &DissolveOptions,
+) -> Result<usize, SolveError> {
+    let on_border = border_vertices(topo);
+    let mut tried = vec![false; planes.len()];
+    let (mut trials, mut dissolved) = (0, 0);
+    loop {
+        let bad = bad_faces(pos, faces, fc, planes, min_area);
+        if bad.is_empty() || trials >= opts.max_trials {
+            break;
+        }
+        let mut size = vec![0usize; planes.len()];
+        for &c in fc.iter() {
+            size[c as usize] += 1;
+        }
+        let mut cands: Vec<u32> = bad.iter().map(|&f| fc[f]).collect();
+        cands.sort_unstable();
+        cands.dedup();
+        cands.retain(|&c| !tried[c as usize] && size[c as usize] <= opts.max_faces);
+        cands.sort_by_key(|&c| (size[c as usize], c));
+        let Some(&r) = cands.first() else { break };
+        tried[r as usize] = true;
+        trials += 1;
+        if try_dissolve(
+            topo, faces, fc, planes, input, pos, min_area, opts, &on_border, r,
+        )? {
+            dissolved += 1;
+        }
+    }
+    Ok(dissolved)
+}
+
+/// Region growing of region `r`'s faces into its neighbours (see module doc): new labels of
+/// `members`, or `None` when some face cannot be reached from a neighbour with a plane.
+fn hand_out(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &[u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    r: u32,
+    members: &[usize],
+) -> Option<Vec<(usize, u32)>> {
+    let mut label: std::collections::HashMap<usize, u32> = std::collections::HashMap::new();
+    let normal = |f: usize| normalize(face_area_normal(input, faces[f])).unwrap_or([0.0; 3]);
+    // Cost of giving face f to region c: 1 − cos of the angle between their normals.
+    let mut heap: BinaryHeap<Reverse<(u64, usize, u32)>> = BinaryHeap::new();
+    let push_from =
+        |f: usize, label: &std::collections::HashMap<usize, u32>, heap: &mut BinaryHeap<_>| {
+            for &e in &topo.face_edges[f] {
+                let ef = topo.edge_faces[e as usize];
+                let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
+                if g == NO_FACE || fc[g as usize] != r || label.contains_key(&(g as usize)) {
+                    continue;
+                }
+                let c = if fc[f] == r { label[&f] } else { fc[f] };
+                let Some(p) = planes[c as usize] else {
+                    continue;
+                };
+                let cost = (1.0 - dot(normal(g as usize), p.n)).max(0.0);
+                heap.push(Reverse((cost.to_bits(), g as usize, c)));
+            }
+        };
+    for &f in members {
+        for &e in &topo.face_edges[f] {
+            let ef = topo.edge_faces[e as usize];
+            let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
+            if g != NO_FACE && fc[g as usize] != r {
+                push_from(g as usize, &label, &mut heap);
+            }
+        }
+    }
+    while let Some(Reverse((_, f, c))) = heap.pop() {
+        if label.contains_key(&f) {
+            continue;
+        }
+        label.insert(f, c);
+        push_from(f, &label, &mut heap);
+    }
+    members
+        .iter()
+        .map(|&f| label.get(&f).map(|&c| (f, c)))
+        .collect()
+}
+
+#[allow(clippy::too_many_arguments)]
+fn try_dissolve(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    opts: &DissolveOptions,
+    on_border: &[bool],
+    r: u32,
+) -> Result<bool, SolveError> {
+    let members: Vec<usize> = (0..fc.len()).filter(|&f| fc[f] == r).collect();
+    let Some(labels) = hand_out(topo, faces, fc, planes, input, r, &members) else {
+        return Ok(false);
+    };
+    let mut verts: Vec<u32> = members.iter().flat_map(|&f| faces[f]).collect();
+    verts.sort_unstable();
+    verts.dedup();
+    // The faces that can change: those of every region at a vertex of `r` (same set before
+    // and after, since `r`'s faces stay in it under their new labels).
+    let mut regions: Vec<u32> = verts
+        .iter()
+        .flat_map(|&v| regions_at(topo, fc, v))
+        .collect();
+    regions.sort_unstable();
+    regions.dedup();
+    let scope: Vec<usize> = (0..fc.len())
+        .filter(|&f| regions.binary_search(&fc[f]).is_ok())
+        .collect();
+    let before = bad_faces_among(pos, faces, fc, planes, min_area, &scope).len();
+    let saved = pos.to_vec();
+    for &(f, c) in &labels {
+        fc[f] = c;
+    }
+    let restore = |fc: &mut [u32], pos: &mut [V3]| {
+        for &f in &members {
+            fc[f] = r;
+        }
+        pos.copy_from_slice(&saved);
+    };
+    // Every region stays one fan around every vertex (no region cut in two or pinched).
+    let simple = verts.iter().all(|&v| {
+        regions_at(topo, fc, v).iter().all(|&c| {
+            let inside = |h: usize| fc[h] == c;
+            fans(topo, faces, v, &inside) <= 1
+        })
+    });
+    if !simple {
+        restore(fc, pos);
+        return Ok(false);
+    }
+    for &v in &verts {
+        let ps: Vec<Plane> = regions_at(topo, fc, v)
+            .iter()
+            .filter_map(|&c| planes[c as usize])
+            .collect();
+        match onto_planes(pos[v as usize], &ps, opts.tol) {
+            Some(y) => pos[v as usize] = y,
+            None => {
+                restore(fc, pos);
+                return Ok(false);
+            }
+        }
+    }
+    let vc = vertex_clusters(topo, fc);
+    let keep = settle(
+        topo,
+        faces,
+        fc,
+        planes,
+        input,
+        pos,
+        min_area,
+        on_border,
+        &vc,
+        &saved,
+        &scope,
+        &regions,
+        before,
+        usize::MAX,
+    )?;
+    if !keep {
+        restore(fc, pos);
+    }
+    Ok(keep)
+}
+
+/// After a change of regions or planes that put the vertices it touched onto their plane sets:
+/// re-spaces the chains, repairs what folds in `scope` (Tutte patches, then the barrier
+/// untangler across boundaries) and says whether the change is worth keeping — fewer bad faces
+/// in `scope` (the faces of `regions`) than `before`, counting also every face outside it
+/// around a vertex that moved (against `saved`, the positions before the change). The caller
+/// restores when not.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn settle(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &[u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    on_border: &[bool],
+    vc: &[Vec<u32>],
+    saved: &[V3],
+    scope: &[usize],
+    regions: &[u32],
+    before: usize,
+    slide_excess: usize,
+) -> Result<bool, SolveError> {
+    respace_chains(topo, fc, vc, on_border, input, pos);
+    let layout = Layout {
+        topo,
+        faces,
+        fc,
+        planes,
+        vc,
+        on_border,
+        input,
+        min_area,
+    };
+    let mut bad = bad_faces_among(pos, faces, fc, planes, min_area, scope);
+    if bad.len() >= before {
+        repair_patches(&layout, pos, bad, Some(scope), 4)?;
+        bad = bad_faces_among(pos, faces, fc, planes, min_area, scope);
+    }
+    if bad.len() >= before && !bad.is_empty() && bad.len() <= before.saturating_add(slide_excess) {
+        let quick = Untangle2dOptions {
+            max_rounds: 12,
+            iterations: 100,
+            stall_rounds: 4,
+            ..Untangle2dOptions::default()
+        };
+        slide_near(&layout, pos, &bad, 3, &quick);
+        bad = bad_faces_among(pos, faces, fc, planes, min_area, scope);
+    }
+    let after = bad.len();
+    let mut outside: Vec<usize> = (0..pos.len())
+        .filter(|&v| pos[v] != saved[v])
+        .flat_map(|v| topo.vertex_faces(v as u32).iter().map(|&h| h as usize))
+        .filter(|&h| regions.binary_search(&fc[h]).is_err())
+        .collect();
+    outside.sort_unstable();
+    outside.dedup();
+    let (extra_before, extra_after) = if outside.is_empty() {
+        (0, 0)
+    } else {
+        (
+            bad_faces_among(saved, faces, fc, planes, min_area, &outside).len(),
+            bad_faces_among(pos, faces, fc, planes, min_area, &outside).len(),
+        )
+    };
+    Ok(after + extra_after < before + extra_before)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::TriMesh;
+
+    /// A flat n×n grid in z = 0 (two triangles per cell, normal +z).
+    fn flat_grid(n: u32) -> TriMesh {
+        let positions = (0..(n + 1) * (n + 1))
+            .map(|i| [(i % (n + 1)) as f64, (i / (n + 1)) as f64, 0.0])
+            .collect();
+        let mut faces = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let a = y * (n + 1) + x;
+                faces.push([a, a + 1, a + n + 2]);
+                faces.push([a, a + n + 2, a + n + 1]);
+            }
+        }
+        TriMesh { positions, faces }
+    }
+
+    /// A small region inside a flat one with a tilted plane: its outline lies on the line where
+    /// the planes meet, so it collapses. Dissolving it into the surrounding region restores a
+    /// flat, fold-free grid; a limit below its size leaves it alone.
+    #[test]
+    fn a_collapsed_inner_region_goes_back_to_its_neighbour() {
+        let m = flat_grid(4);
+        let topo = Topology::build(&m, std::path::Path::new("grid")).unwrap();
+        let centre = 12u32;
+        let fc: Vec<u32> = m
+            .faces
+            .iter()
+            .map(|f| u32::from(f.contains(&centre)))
+            .collect();
+        let n = normalize([0.3, 0.0, 1.0]).unwrap();
+        let planes = vec![
+            Some(Plane {
+                n: [0.0, 0.0, 1.0],
+                d: 0.0,
+            }),
+            Some(Plane {
+                n,
+                d: -dot(n, m.positions[centre as usize]),
+            }),
+        ];
+        let mut pos = m.positions.clone();
+        for v in 0..pos.len() as u32 {
+            let ps: Vec<Plane> = regions_at(&topo, &fc, v)
+                .iter()
+                .filter_map(|&c| planes[c as usize])
+                .collect();
+            pos[v as usize] = onto_planes(pos[v as usize], &ps, 1e-9).unwrap();
+        }
+        // The collapsed faces keep areas of ~1e-11 from the projection's round-off.
+        let min_area = 1e-9;
+        let before = bad_faces(&pos, &m.faces, &fc, &planes, min_area);
+        assert!(before.len() >= 2, "{before:?} {fc:?} {pos:?}");
+        let opts = |max_faces| DissolveOptions {
+            max_faces,
+            tol: 1e-9,
+            max_trials: 4,
+        };
+        let (mut fc2, mut pos2) = (fc.clone(), pos.clone());
+        let none = dissolve_folded_regions(
+            &topo,
+            &m.faces,
+            &mut fc2,
+            &planes,
+            &m.positions,
+            &mut pos2,
+            min_area,
+            &opts(5),
+        )
+        .unwrap();
+        assert_eq!((none, &fc2, &pos2), (0, &fc, &pos));
+        let mut fc = fc;
+        let one = dissolve_folded_regions(
+            &topo,
+            &m.faces,
+            &mut fc,
+            &planes,
+            &m.positions,
+            &mut pos,
+            min_area,
+            &opts(6),
+        )
+        .unwrap();
+        assert_eq!(one, 1);
+        assert!(fc.iter().all(|&c| c == 0));
+        assert!(bad_faces(&pos, &m.faces, &fc, &planes, min_area).is_empty());
+        assert!(pos.iter().all(|p| p[2].abs() < 1e-9));
+    }
+}

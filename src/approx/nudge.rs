@@ -1,0 +1,262 @@
+//! Tilts and shifts single planes where the folds left need different plane geometry.
+//!
+//! Every repair before this one keeps the planes: it moves vertices or faces. But where two
+//! corners of the same chain (points where three planes meet) nearly coincide or come in the
+//! wrong order, the faces between them fold wherever the vertices go; the cure is to move the
+//! corners, i.e. the planes. A small coordinate search does that: for a region at a bad face,
+//! rotate its plane about its centroid by a few angles around its two in-plane axes, or shift
+//! it along its normal; put the region's vertices onto their new plane sets (a vertex of one
+//! region orthogonally, of two onto the new line, of three onto the new point); repair as after
+//! a face move ([`super::dissolve::settle`]); keep the first change that leaves fewer bad faces
+//! in the region and its neighbours. Planarity stays exact; the approximation error changes a
+//! little (the plane no longer is the region's best fit).
+
+use super::cluster::{regions_at, vertex_clusters};
+use super::dissolve::settle;
+use super::geom::{add, cross, dot, norm, normalize, scale, sub, Frame, Plane, V3};
+use super::reassign::onto_planes;
+use super::untangle::{bad_faces, bad_faces_among, border_vertices};
+use crate::linalg::SolveError;
+use crate::mesh::Topology;
+
+/// Options of [`nudge_planes`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct NudgeOptions {
+    /// Rotation angles tried (radians), each in both senses about both in-plane axes.
+    pub angles: Vec<f64>,
+    /// Shifts along the normal tried, relative to the region's extent, in both senses.
+    pub shifts: Vec<f64>,
+    /// Largest distance of a vertex to any of its planes after projection (absolute).
+    pub tol: f64,
+    /// Largest number of changes tried overall.
+    pub max_trials: usize,
+    /// Rounds over the regions at bad faces; a round that keeps nothing ends the search.
+    pub rounds: usize,
+    /// The barrier untangler (the slow repair) runs only when Tutte patches leave at most this
+    /// many more bad faces than before the change.
+    pub slide_excess: usize,
+}
+
+/// What [`nudge_planes`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Nudged {
+    pub kept: usize,
+    pub trials: usize,
+}
+
+/// Coordinate search over the planes of regions at bad faces (see module doc). `planes`,
+/// `pos` change in place; `fc` does not.
+#[allow(clippy::too_many_arguments)]
+pub fn nudge_planes(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &[u32],
+    planes: &mut [Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    opts: &NudgeOptions,
+) -> Result<Nudged, SolveError> {
+    let on_border = border_vertices(topo);
+    let vc = vertex_clusters(topo, fc);
+    let mut region_verts: Vec<Vec<u32>> = vec![Vec::new(); planes.len()];
+    for (v, cs) in vc.iter().enumerate() {
+        for &c in cs {
+            region_verts[c as usize].push(v as u32);
+        }
+    }
+    let mut region_faces: Vec<Vec<usize>> = vec![Vec::new(); planes.len()];
+    for (f, &c) in fc.iter().enumerate() {
+        region_faces[c as usize].push(f);
+    }
+    let mut out = Nudged::default();
+    for _ in 0..opts.rounds {
+        let bad = bad_faces(pos, faces, fc, planes, min_area);
+        if bad.is_empty() {
+            break;
+        }
+        let mut cands: Vec<u32> = bad
+            .iter()
+            .flat_map(|&f| {
+                faces[f]
+                    .iter()
+                    .flat_map(|&v| vc[v as usize].iter().copied())
+            })
+            .collect();
+        cands.sort_unstable();
+        cands.dedup();
+        let mut kept = 0;
+        for c in cands {
+            let Some(p) = planes[c as usize] else {
+                continue;
+            };
+            let verts = &region_verts[c as usize];
+            // The faces that can change: the region's and its neighbours'.
+            let mut regions: Vec<u32> = verts
+                .iter()
+                .flat_map(|&v| vc[v as usize].iter().copied())
+                .collect();
+            regions.sort_unstable();
+            regions.dedup();
+            let scope: Vec<usize> = regions
+                .iter()
+                .flat_map(|&r| region_faces[r as usize].iter().copied())
+                .collect();
+            let before = bad_faces_among(pos, faces, fc, planes, min_area, &scope).len();
+            if before == 0 {
+                continue;
+            }
+            let Some(frame) = Frame::of(&p) else { continue };
+            let pts: Vec<V3> = verts.iter().map(|&v| pos[v as usize]).collect();
+            if pts.is_empty() {
+                continue;
+            }
+            let centroid = scale(
+                pts.iter().fold([0.0; 3], |a, &x| add(a, x)),
+                1.0 / pts.len() as f64,
+            );
+            // Twice the largest distance from the centroid: the region's size.
+            let extent = 2.0
+                * pts
+                    .iter()
+                    .map(|&x| norm(sub(x, centroid)))
+                    .fold(0.0, f64::max);
+            let mut trials: Vec<Plane> = Vec::new();
+            for &a in &opts.angles {
+                for axis in [frame.u, frame.v] {
+                    for s in [a, -a] {
+                        // Rodrigues about an in-plane axis (perpendicular to n).
+                        let n = add(scale(p.n, s.cos()), scale(cross(axis, p.n), s.sin()));
+                        if let Some(n) = normalize(n) {
+                            trials.push(Plane {
+                                n,
+                                d: -dot(n, centroid),
+                            });
+                        }
+                    }
+                }
+            }
+            for &t in &opts.shifts {
+                for s in [t, -t] {
+                    trials.push(Plane {
+                        n: p.n,
+                        d: p.d - s * extent,
+                    });
+                }
+            }
+            for q in trials {
+                if out.trials >= opts.max_trials {
+                    return Ok(out);
+                }
+                out.trials += 1;
+                let saved = pos.to_vec();
+                planes[c as usize] = Some(q);
+                let placed = verts.iter().all(|&v| {
+                    let ps: Vec<Plane> = regions_at(topo, fc, v)
+                        .iter()
+                        .filter_map(|&r| planes[r as usize])
+                        .collect();
+                    match onto_planes(pos[v as usize], &ps, opts.tol) {
+                        Some(y) => {
+                            pos[v as usize] = y;
+                            true
+                        }
+                        None => false,
+                    }
+                });
+                let keep = placed
+                    && settle(
+                        topo,
+                        faces,
+                        fc,
+                        planes,
+                        input,
+                        pos,
+                        min_area,
+                        &on_border,
+                        &vc,
+                        &saved,
+                        &scope,
+                        &regions,
+                        before,
+                        opts.slide_excess,
+                    )?;
+                if keep {
+                    out.kept += 1;
+                    kept += 1;
+                    break;
+                }
+                planes[c as usize] = Some(p);
+                pos.copy_from_slice(&saved);
+            }
+        }
+        if kept == 0 {
+            break;
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::approx::slide::tests::grid_book;
+    use crate::mesh::TriMesh;
+
+    /// A two-page book whose page B plane is shifted so that the spine (where the pages meet)
+    /// lands past page A's first row: faces of page A between them flip, and the row's border
+    /// vertices are fixed, so no vertex placement fixes them. Moving page B's plane back does;
+    /// every vertex ends on its planes.
+    #[test]
+    fn shifting_a_plane_moves_a_misplaced_chain_back() {
+        let n = 4;
+        let (input, faces, fc, mut planes) = grid_book(n);
+        let mesh = TriMesh {
+            positions: input.clone(),
+            faces: faces.clone(),
+        };
+        let topo = Topology::build(&mesh, std::path::Path::new("book")).unwrap();
+        // Page B (normal +y) moved to y = 1.15; its vertices follow, the spine onto the line.
+        planes[1] = Some(Plane {
+            n: [0.0, 1.0, 0.0],
+            d: -1.15,
+        });
+        let vc = vertex_clusters(&topo, &fc);
+        let mut pos = input.clone();
+        for (v, cs) in vc.iter().enumerate() {
+            if cs.contains(&1) {
+                pos[v][1] = 1.15;
+            }
+        }
+        let min_area = 1e-12;
+        let before = bad_faces(&pos, &faces, &fc, &planes, min_area).len();
+        assert!(before >= 2, "{before}");
+        let opts = NudgeOptions {
+            angles: vec![0.01, 0.1],
+            shifts: vec![0.01, 0.08],
+            tol: 1e-9,
+            max_trials: 200,
+            rounds: 8,
+            slide_excess: 2,
+        };
+        let r = nudge_planes(
+            &topo,
+            &faces,
+            &fc,
+            &mut planes,
+            &input,
+            &mut pos,
+            min_area,
+            &opts,
+        )
+        .unwrap();
+        assert!(r.kept >= 1);
+        assert!(bad_faces(&pos, &faces, &fc, &planes, min_area).is_empty());
+        for (v, p) in pos.iter().enumerate() {
+            for &c in &vc[v] {
+                let d = planes[c as usize].unwrap().signed_distance(*p);
+                assert!(d.abs() < 1e-9, "vertex {v} off plane {c}: {d}");
+            }
+        }
+    }
+}
