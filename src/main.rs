@@ -535,6 +535,10 @@ struct ApproxArgs {
     /// Seed of the region-growing order.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Further runs with seeds seed+1, seed+2, … while the best run so far has ≥ 4 flipped or
+    /// degenerate faces (the best run is written; 0 = one run only).
+    #[arg(long, default_value_t = 4)]
+    restarts: usize,
     /// Region-growing / merge angle in degrees.
     #[arg(long, default_value_t = 20.0)]
     angle: f64,
@@ -561,6 +565,7 @@ fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     let (m, topo, _) = mesh::load(&args.input, &mesh::ValidateOptions::default())?;
     let mut opts = ApproxOptions::new(args.k);
     opts.seed = args.seed;
+    opts.restarts = args.restarts;
     opts.angle_deg = args.angle;
     let bar = if args.quiet {
         indicatif::ProgressBar::hidden()
@@ -597,8 +602,16 @@ fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
         write(p, serde_json::to_string_pretty(r).unwrap_or_default())?;
     }
     eprintln!(
-        "foldfree approx: {} faces → {} regions (K = {}), {} polygons, {} corners, {:.2} s",
-        r.faces, r.k_obtained, r.k_requested, r.polygons, r.corners, r.seconds.total
+        "foldfree approx: {} faces → {} regions (K = {}), {} polygons, {} corners, {:.2} s ({} run{}, seed {} kept)",
+        r.faces,
+        r.k_obtained,
+        r.k_requested,
+        r.polygons,
+        r.corners,
+        r.seconds_all_runs,
+        r.runs,
+        if r.runs == 1 { "" } else { "s" },
+        r.seed_used
     );
     eprintln!(
         "  input→plane distance mean {:.4e} ({:.2e}·diag), max {:.4e}; planarity of output {:.2e}·diag; flipped {}, degenerate {}",
