@@ -11,6 +11,9 @@
 //! dissolved one, plus every face around a vertex that moved, have fewer bad faces than before.
 //! Planes stay as they are; the dissolved region is left empty (one region fewer, so never more
 //! than K).
+//!
+//! The same relabel-and-repair step ([`try_relabel`]) also drives two-face moves
+//! ([`pair_moves`]), for the folds a one-face move cannot leave.
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -151,14 +154,38 @@ fn try_dissolve(
     let Some(labels) = hand_out(topo, faces, fc, planes, input, r, &members) else {
         return Ok(false);
     };
-    let mut verts: Vec<u32> = members.iter().flat_map(|&f| faces[f]).collect();
+    try_relabel(
+        topo, faces, fc, planes, input, pos, min_area, opts.tol, on_border, &labels,
+    )
+}
+
+/// Gives each face of `moves` its new region, puts the vertices of those faces onto their new
+/// plane sets (within `tol`) and keeps the change when [`settle`] says so; otherwise restores
+/// `fc` and `pos`. Refused outright when a region would be cut in two or pinched at a vertex
+/// (more than one fan of it around a vertex) or a vertex has no point on all its planes.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn try_relabel(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    tol: f64,
+    on_border: &[bool],
+    moves: &[(usize, u32)],
+) -> Result<bool, SolveError> {
+    let old: Vec<(usize, u32)> = moves.iter().map(|&(f, _)| (f, fc[f])).collect();
+    let mut verts: Vec<u32> = moves.iter().flat_map(|&(f, _)| faces[f]).collect();
     verts.sort_unstable();
     verts.dedup();
-    // The faces that can change: those of every region at a vertex of `r` (same set before
-    // and after, since `r`'s faces stay in it under their new labels).
+    // The faces that can change: those of every region at a moved face's vertex (the new
+    // regions are among them: a face only moves to a region it touches).
     let mut regions: Vec<u32> = verts
         .iter()
         .flat_map(|&v| regions_at(topo, fc, v))
+        .chain(moves.iter().map(|&(_, c)| c))
         .collect();
     regions.sort_unstable();
     regions.dedup();
@@ -167,16 +194,15 @@ fn try_dissolve(
         .collect();
     let before = bad_faces_among(pos, faces, fc, planes, min_area, &scope).len();
     let saved = pos.to_vec();
-    for &(f, c) in &labels {
+    for &(f, c) in moves {
         fc[f] = c;
     }
     let restore = |fc: &mut [u32], pos: &mut [V3]| {
-        for &f in &members {
-            fc[f] = r;
+        for &(f, c) in &old {
+            fc[f] = c;
         }
         pos.copy_from_slice(&saved);
     };
-    // Every region stays one fan around every vertex (no region cut in two or pinched).
     let simple = verts.iter().all(|&v| {
         regions_at(topo, fc, v).iter().all(|&c| {
             let inside = |h: usize| fc[h] == c;
@@ -192,7 +218,7 @@ fn try_dissolve(
             .iter()
             .filter_map(|&c| planes[c as usize])
             .collect();
-        match onto_planes(pos[v as usize], &ps, opts.tol) {
+        match onto_planes(pos[v as usize], &ps, tol) {
             Some(y) => pos[v as usize] = y,
             None => {
                 restore(fc, pos);
@@ -221,6 +247,77 @@ fn try_dissolve(
         restore(fc, pos);
     }
     Ok(keep)
+}
+
+/// Two-face moves at the bad faces left: for each bad face, every face around its corners
+/// together with one edge neighbour of the same region, into each region edge-adjacent to the
+/// pair. A one-face move can be stuck between two bad states (face f bad in region a, a
+/// neighbour bad when f is in region b); moving f with that neighbour can leave neither.
+/// At most `max_trials` pairs are tried; returns the moves kept.
+#[allow(clippy::too_many_arguments)]
+pub fn pair_moves(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    tol: f64,
+    max_trials: usize,
+) -> Result<usize, SolveError> {
+    let on_border = border_vertices(topo);
+    let edge_neighbors = |f: usize| {
+        topo.face_edges[f].map(|e| {
+            let ef = topo.edge_faces[e as usize];
+            let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
+            (g != NO_FACE).then_some(g as usize)
+        })
+    };
+    let (mut trials, mut kept) = (0, 0);
+    let bad = bad_faces(pos, faces, fc, planes, min_area);
+    for f0 in bad {
+        if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
+            continue;
+        }
+        let mut cands: Vec<usize> = vec![f0];
+        for &v in &faces[f0] {
+            for &h in topo.vertex_faces(v) {
+                if !cands.contains(&(h as usize)) {
+                    cands.push(h as usize);
+                }
+            }
+        }
+        'pairs: for &g in &cands {
+            for h in edge_neighbors(g).into_iter().flatten() {
+                if fc[h] != fc[g] || h < g && cands.contains(&h) {
+                    continue; // other region, or this pair comes up from h's side
+                }
+                let mut targets: Vec<u32> = [g, h]
+                    .iter()
+                    .flat_map(|&x| edge_neighbors(x).into_iter().flatten())
+                    .map(|x| fc[x])
+                    .filter(|&c| c != fc[g] && planes[c as usize].is_some())
+                    .collect();
+                targets.sort_unstable();
+                targets.dedup();
+                for to in targets {
+                    if trials >= max_trials {
+                        return Ok(kept);
+                    }
+                    trials += 1;
+                    let moves = [(g, to), (h, to)];
+                    if try_relabel(
+                        topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
+                    )? {
+                        kept += 1;
+                        break 'pairs;
+                    }
+                }
+            }
+        }
+    }
+    Ok(kept)
 }
 
 /// After a change of regions or planes that put the vertices it touched onto their plane sets:
@@ -382,5 +479,65 @@ mod tests {
         assert!(fc.iter().all(|&c| c == 0));
         assert!(bad_faces(&pos, &m.faces, &fc, &planes, min_area).is_empty());
         assert!(pos.iter().all(|p| p[2].abs() < 1e-9));
+    }
+
+    /// Two-face moves on tangled two-page books: never more bad faces, every vertex on its
+    /// planes, some moves kept; nothing changes on a clean layout.
+    #[test]
+    fn pair_moves_never_add_folds_and_keep_planes() {
+        let (input, faces, fc0, planes) = crate::approx::slide::tests::grid_book(5);
+        let mesh = TriMesh {
+            positions: input.clone(),
+            faces: faces.clone(),
+        };
+        let topo = Topology::build(&mesh, std::path::Path::new("book")).unwrap();
+        let (mut fc, mut pos) = (fc0.clone(), input.clone());
+        let kept = pair_moves(
+            &topo, &faces, &mut fc, &planes, &input, &mut pos, 1e-12, 1e-9, 100,
+        )
+        .unwrap();
+        assert_eq!((kept, &fc, &pos), (0, &fc0, &input));
+        let border = border_vertices(&topo);
+        let mut state = 99u64;
+        let mut rnd = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        let mut moved = 0;
+        for trial in 0..6 {
+            let mut fc = fc0.clone();
+            let mut pos = input.clone();
+            let vc = vertex_clusters(&topo, &fc);
+            // Along the spine for its vertices, in the page for the others.
+            for v in 0..pos.len() {
+                if border[v] {
+                    continue;
+                }
+                pos[v][0] += 1.5 * rnd();
+                if vc[v].len() == 1 {
+                    pos[v][if vc[v][0] == 0 { 1 } else { 2 }] += 0.8 * rnd();
+                }
+            }
+            let before = bad_faces(&pos, &faces, &fc, &planes, 1e-12).len();
+            let k = pair_moves(
+                &topo, &faces, &mut fc, &planes, &input, &mut pos, 1e-12, 1e-9, 200,
+            )
+            .unwrap();
+            let after = bad_faces(&pos, &faces, &fc, &planes, 1e-12).len();
+            moved += k;
+            assert!(after <= before, "trial {trial}: {before} -> {after}");
+            for (v, p) in pos.iter().enumerate() {
+                for c in regions_at(&topo, &fc, v as u32) {
+                    let d = planes[c as usize].unwrap().signed_distance(*p);
+                    assert!(
+                        d.abs() < 1e-9,
+                        "trial {trial}: vertex {v} off plane {c}: {d}"
+                    );
+                }
+            }
+        }
+        assert!(moved >= 3, "only {moved} pair moves kept");
     }
 }

@@ -17,8 +17,9 @@
 //!    split in two with unused budget (< K regions) and stage 4 rerun, keeping the pass with
 //!    the fewest bad faces; on that pass, vertices near the folds left slide along their
 //!    planes and plane–plane lines across region boundaries ([`slide`]), then single planes
-//!    are tilted or shifted to move misplaced corners ([`nudge`]) and small regions that still
-//!    fold are given to their neighbours ([`dissolve`]);
+//!    are tilted or shifted to move misplaced corners ([`nudge`]), small regions that still
+//!    fold are given to their neighbours and pairs of faces moved ([`dissolve`]); a run that
+//!    still folds is repeated with the next seeds (`ApproxOptions::restarts`);
 //! 5. [`polygons`]: one polygon per region, corners where boundaries meet or turn.
 #![forbid(unsafe_code)]
 
@@ -123,6 +124,9 @@ pub struct ApproxOptions {
     /// Largest number of plane tilts and shifts tried at the end against the folds left (see
     /// [`nudge`]); 0 = off.
     pub nudge_trials: usize,
+    /// Largest number of two-face moves tried per round at the end (see
+    /// [`dissolve::pair_moves`]); 0 = off.
+    pub pair_move_trials: usize,
     pub boundary: BoundaryL0Options,
 }
 
@@ -142,6 +146,7 @@ impl ApproxOptions {
             slide_repairs: 400,
             dissolve_max_faces: 200,
             nudge_trials: 2000,
+            pair_move_trials: 400,
             max_split_passes: 4,
             split_per_pass: 1,
             corner_reach_rel: 0.04,
@@ -570,10 +575,10 @@ fn run_once(
         .kept;
         times.planarize += t.elapsed().as_secs_f64();
     }
-    // Then the planes themselves ([`nudge`]) and the small regions that still fold
-    // ([`dissolve`]), alternately while they remove folds: a dissolved region changes the
-    // outlines the planes must meet, a nudged plane the corners a dissolve must reach. Both
-    // keep a change only where it leaves fewer bad faces. Skipped above `END_REPAIR_MAX_BAD`:
+    // Then the planes themselves ([`nudge`]), the small regions that still fold
+    // ([`dissolve`]) and two-face moves ([`dissolve::pair_moves`]), in turn while they remove
+    // folds: a dissolved region changes the outlines the planes must meet, a nudged plane the
+    // corners a move must reach. Each keeps a change only where it leaves fewer bad faces. Skipped above `END_REPAIR_MAX_BAD`:
     // that many folds come from the partition itself (block 24 keeps its 70 through 2 000
     // trials) and each trial costs a local repair.
     let (mut nudged, mut dissolved) = (0, 0);
@@ -628,6 +633,20 @@ fn run_once(
                 n_clusters = renumber_with_planes(&mut face_cluster, &mut pl.planes);
             }
             dissolved += d;
+        }
+        if opts.pair_move_trials > 0 && count_bad(&pl, &face_cluster) > 0 {
+            let k = dissolve::pair_moves(
+                topo,
+                &mesh.faces,
+                &mut face_cluster,
+                &pl.planes,
+                &mesh.positions,
+                &mut pl.positions,
+                min_area,
+                1e-8 * diag,
+                opts.pair_move_trials,
+            )?;
+            faces_moved += 2 * k;
         }
         times.planarize += t.elapsed().as_secs_f64();
         if count_bad(&pl, &face_cluster) >= before {
