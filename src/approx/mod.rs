@@ -240,7 +240,8 @@ pub struct ApproxReport {
     /// three edge-neighbours in it (boundary smoothing).
     pub faces_reassigned: usize,
     /// Faces moved into a neighbouring region after planarity because no vertex placement
-    /// removed the fold there (see [`reassign`]), summed over the passes.
+    /// removed the fold there (see [`reassign`]), summed over the passes, plus the faces of
+    /// the two-face moves at the end ([`dissolve::pair_moves`]).
     pub fold_moves: usize,
     /// Neighbourhoods of folds where sliding vertices across region boundaries removed bad
     /// faces (see [`slide`]), on the kept pass.
@@ -319,9 +320,9 @@ pub fn approximate(
         sub.seed = opts.seed.wrapping_add(i as u64);
         let out = run_once(mesh, topo, &sub, progress)?;
         runs += 1;
+        // Fewest bad faces, then the smaller mean distance.
         let key = |o: &ApproxOutput| (bad(o), o.report.mean_input_distance);
-        if key(&out).0 < key(&best).0 || (key(&out).0 == key(&best).0 && key(&out).1 < key(&best).1)
-        {
+        if key(&out) < key(&best) {
             best = out;
         }
     }
@@ -578,9 +579,9 @@ fn run_once(
     // Then the planes themselves ([`nudge`]), the small regions that still fold
     // ([`dissolve`]) and two-face moves ([`dissolve::pair_moves`]), in turn while they remove
     // folds: a dissolved region changes the outlines the planes must meet, a nudged plane the
-    // corners a move must reach. Each keeps a change only where it leaves fewer bad faces. Skipped above `END_REPAIR_MAX_BAD`:
-    // that many folds come from the partition itself (block 24 keeps its 70 through 2 000
-    // trials) and each trial costs a local repair.
+    // corners a move must reach. Each keeps a change only where it leaves fewer bad faces.
+    // Skipped above `END_REPAIR_MAX_BAD`: that many folds come from the partition itself
+    // (block 24 keeps its 70 through 2 000 trials) and each trial costs a local repair.
     let (mut nudged, mut dissolved) = (0, 0);
     let mut n_clusters = n_clusters;
     let count_bad = |pl: &boundary_l0::Planarized, fc: &[u32]| {
