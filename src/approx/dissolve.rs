@@ -20,7 +20,7 @@ use std::collections::BinaryHeap;
 
 use super::cluster::{regions_at, vertex_clusters};
 use super::geom::{dot, face_area_normal, normalize, Plane, V3};
-use super::reassign::{fans, onto_planes};
+use super::reassign::{faces_around, fans, onto_plane_sets};
 use super::slide::slide_near;
 use super::untangle::{
     bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains, Layout,
@@ -213,18 +213,9 @@ pub(super) fn try_relabel(
         restore(fc, pos);
         return Ok(false);
     }
-    for &v in &verts {
-        let ps: Vec<Plane> = regions_at(topo, fc, v)
-            .iter()
-            .filter_map(|&c| planes[c as usize])
-            .collect();
-        match onto_planes(pos[v as usize], &ps, tol) {
-            Some(y) => pos[v as usize] = y,
-            None => {
-                restore(fc, pos);
-                return Ok(false);
-            }
-        }
+    if !onto_plane_sets(topo, fc, planes, pos, &verts, tol) {
+        restore(fc, pos);
+        return Ok(false);
     }
     let vc = vertex_clusters(topo, fc);
     let keep = settle(
@@ -280,14 +271,7 @@ pub fn pair_moves(
         if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
             continue;
         }
-        let mut cands: Vec<usize> = vec![f0];
-        for &v in &faces[f0] {
-            for &h in topo.vertex_faces(v) {
-                if !cands.contains(&(h as usize)) {
-                    cands.push(h as usize);
-                }
-            }
-        }
+        let cands = faces_around(topo, faces, f0);
         'pairs: for &g in &cands {
             for h in edge_neighbors(g).into_iter().flatten() {
                 if fc[h] != fc[g] || h < g && cands.contains(&h) {
@@ -434,13 +418,8 @@ mod tests {
             }),
         ];
         let mut pos = m.positions.clone();
-        for v in 0..pos.len() as u32 {
-            let ps: Vec<Plane> = regions_at(&topo, &fc, v)
-                .iter()
-                .filter_map(|&c| planes[c as usize])
-                .collect();
-            pos[v as usize] = onto_planes(pos[v as usize], &ps, 1e-9).unwrap();
-        }
+        let all: Vec<u32> = (0..pos.len() as u32).collect();
+        assert!(onto_plane_sets(&topo, &fc, &planes, &mut pos, &all, 1e-9));
         // The collapsed faces keep areas of ~1e-11 from the projection's round-off.
         let min_area = 1e-9;
         let before = bad_faces(&pos, &m.faces, &fc, &planes, min_area);
@@ -498,13 +477,7 @@ mod tests {
         .unwrap();
         assert_eq!((kept, &fc, &pos), (0, &fc0, &input));
         let border = border_vertices(&topo);
-        let mut state = 99u64;
-        let mut rnd = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut rnd = crate::approx::slide::tests::uniform(99);
         let mut moved = 0;
         for trial in 0..6 {
             let mut fc = fc0.clone();

@@ -11,10 +11,10 @@
 //! in the region and its neighbours. Planarity stays exact; the approximation error changes a
 //! little (the plane no longer is the region's best fit).
 
-use super::cluster::{regions_at, vertex_clusters};
+use super::cluster::vertex_clusters;
 use super::dissolve::settle;
 use super::geom::{add, cross, dot, norm, normalize, scale, sub, Frame, Plane, V3};
-use super::reassign::onto_planes;
+use super::reassign::onto_plane_sets;
 use super::untangle::{bad_faces, bad_faces_among, border_vertices};
 use crate::linalg::SolveError;
 use crate::mesh::Topology;
@@ -151,19 +151,7 @@ pub fn nudge_planes(
                 out.trials += 1;
                 let saved = pos.to_vec();
                 planes[c as usize] = Some(q);
-                let placed = verts.iter().all(|&v| {
-                    let ps: Vec<Plane> = regions_at(topo, fc, v)
-                        .iter()
-                        .filter_map(|&r| planes[r as usize])
-                        .collect();
-                    match onto_planes(pos[v as usize], &ps, opts.tol) {
-                        Some(y) => {
-                            pos[v as usize] = y;
-                            true
-                        }
-                        None => false,
-                    }
-                });
+                let placed = onto_plane_sets(topo, fc, planes, pos, verts, opts.tol);
                 let keep = placed
                     && settle(
                         topo,

@@ -67,6 +67,45 @@ pub(super) fn onto_planes(x: V3, planes: &[Plane], tol: f64) -> Option<V3> {
         .then_some(y)
 }
 
+/// Puts each of `verts` onto the planes of its regions under `fc` ([`onto_planes`]); false at
+/// the first vertex with no common point (earlier ones have moved: the caller restores).
+pub(super) fn onto_plane_sets(
+    topo: &Topology,
+    fc: &[u32],
+    planes: &[Option<Plane>],
+    pos: &mut [V3],
+    verts: &[u32],
+    tol: f64,
+) -> bool {
+    verts.iter().all(|&v| {
+        let ps: Vec<Plane> = regions_at(topo, fc, v)
+            .iter()
+            .filter_map(|&c| planes[c as usize])
+            .collect();
+        match onto_planes(pos[v as usize], &ps, tol) {
+            Some(y) => {
+                pos[v as usize] = y;
+                true
+            }
+            None => false,
+        }
+    })
+}
+
+/// Face `f0` first, then the other faces around its corners (the candidates of a move that
+/// may remove a fold at `f0`).
+pub(super) fn faces_around(topo: &Topology, faces: &[[u32; 3]], f0: usize) -> Vec<usize> {
+    let mut out: Vec<usize> = vec![f0];
+    for &v in &faces[f0] {
+        for &h in topo.vertex_faces(v) {
+            if !out.contains(&(h as usize)) {
+                out.push(h as usize);
+            }
+        }
+    }
+    out
+}
+
 /// Number of contiguous fans of faces satisfying `inside` around vertex `v` (0 when none;
 /// 1 when all). Each fan ends where the edge leaving `v` in face order leads to a face outside
 /// (or to no face: the mesh border). Needs consistently oriented faces (validated input).
@@ -139,15 +178,7 @@ pub fn reassign_bad_faces(
             if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
                 continue;
             }
-            // The bad face first, then the faces around its corners.
-            let mut cands: Vec<usize> = vec![f0];
-            for &v in &faces[f0] {
-                for &h in topo.vertex_faces(v) {
-                    if !cands.contains(&(h as usize)) {
-                        cands.push(h as usize);
-                    }
-                }
-            }
+            let cands = faces_around(topo, faces, f0);
             'cand: for &g in &cands {
                 let from = fc[g];
                 let mut targets: Vec<u32> = topo.face_edges[g]
@@ -243,18 +274,9 @@ fn try_move(
         pos.copy_from_slice(&saved);
     };
     // Corners of g onto their new plane sets.
-    for &v in &faces[g] {
-        let ps: Vec<Plane> = regions_at(topo, fc, v)
-            .iter()
-            .filter_map(|&c| planes[c as usize])
-            .collect();
-        match onto_planes(pos[v as usize], &ps, opts.tol) {
-            Some(y) => pos[v as usize] = y,
-            None => {
-                restore(fc, pos);
-                return Ok(false);
-            }
-        }
+    if !onto_plane_sets(topo, fc, planes, pos, &faces[g], opts.tol) {
+        restore(fc, pos);
+        return Ok(false);
     }
     let vc = vertex_clusters(topo, fc);
     respace_chains(topo, fc, &vc, on_border, input, pos);

@@ -423,6 +423,17 @@ pub(crate) mod tests {
         }
     }
 
+    /// Deterministic numbers in [-1, 1) (a 64-bit LCG) for random tangles.
+    pub(crate) fn uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        }
+    }
+
     /// Positions, faces, face regions and region planes of a test layout.
     pub(crate) type Book = (Vec<V3>, Vec<[u32; 3]>, Vec<u32>, Vec<Option<Plane>>);
 
@@ -485,13 +496,7 @@ pub(crate) mod tests {
         let topo = Topology::build(&mesh, std::path::Path::new("grid book")).unwrap();
         let vc = vertex_clusters(&topo, &fc);
         let border = border_vertices(&topo);
-        let mut state = 12345u64;
-        let mut rnd = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut rnd = uniform(12345);
         let mut cleared = 0;
         for trial in 0..12 {
             let amp = if trial < 6 { 0.9 } else { 2.5 };
