@@ -218,22 +218,17 @@ pub(super) fn try_relabel(
         return Ok(false);
     }
     let vc = vertex_clusters(topo, fc);
-    let keep = settle(
+    let layout = Layout {
         topo,
         faces,
         fc,
         planes,
-        input,
-        pos,
-        min_area,
+        vc: &vc,
         on_border,
-        &vc,
-        &saved,
-        &scope,
-        &regions,
-        before,
-        usize::MAX,
-    )?;
+        input,
+        min_area,
+    };
+    let keep = settle(&layout, pos, &saved, &scope, &regions, before, usize::MAX)?;
     if !keep {
         restore(fc, pos);
     }
@@ -309,26 +304,18 @@ pub fn pair_moves(
 /// untangler across boundaries) and says whether the change is worth keeping — fewer bad faces
 /// in `scope` (the faces of `regions`) than `before`, counting also every face outside it
 /// around a vertex that moved (against `saved`, the positions before the change). The caller
-/// restores when not.
-#[allow(clippy::too_many_arguments)]
+/// restores when not. `layout` is the state after the change; the barrier untangler runs only
+/// while the patches leave at most `slide_excess` more bad faces than `before`.
 pub(super) fn settle(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    fc: &[u32],
-    planes: &[Option<Plane>],
-    input: &[V3],
+    layout: &Layout,
     pos: &mut [V3],
-    min_area: f64,
-    on_border: &[bool],
-    vc: &[Vec<u32>],
     saved: &[V3],
     scope: &[usize],
     regions: &[u32],
     before: usize,
     slide_excess: usize,
 ) -> Result<bool, SolveError> {
-    respace_chains(topo, fc, vc, on_border, input, pos);
-    let layout = Layout {
+    let Layout {
         topo,
         faces,
         fc,
@@ -337,10 +324,11 @@ pub(super) fn settle(
         on_border,
         input,
         min_area,
-    };
+    } = *layout;
+    respace_chains(topo, fc, vc, on_border, input, pos);
     let mut bad = bad_faces_among(pos, faces, fc, planes, min_area, scope);
     if bad.len() >= before {
-        repair_patches(&layout, pos, bad, Some(scope), 4)?;
+        repair_patches(layout, pos, bad, Some(scope), 4)?;
         bad = bad_faces_among(pos, faces, fc, planes, min_area, scope);
     }
     if bad.len() >= before && !bad.is_empty() && bad.len() <= before.saturating_add(slide_excess) {
@@ -350,7 +338,7 @@ pub(super) fn settle(
             stall_rounds: 4,
             ..Untangle2dOptions::default()
         };
-        slide_near(&layout, pos, &bad, 3, &quick);
+        slide_near(layout, pos, &bad, 3, &quick);
         bad = bad_faces_among(pos, faces, fc, planes, min_area, scope);
     }
     let after = bad.len();

@@ -15,7 +15,7 @@ use super::cluster::vertex_clusters;
 use super::dissolve::settle;
 use super::geom::{add, cross, dot, norm, normalize, scale, sub, Frame, Plane, V3};
 use super::reassign::onto_plane_sets;
-use super::untangle::{bad_faces, bad_faces_among, border_vertices};
+use super::untangle::{bad_faces, bad_faces_among, border_vertices, Layout};
 use crate::linalg::SolveError;
 use crate::mesh::Topology;
 
@@ -152,17 +152,20 @@ pub fn nudge_planes(
                 let saved = pos.to_vec();
                 planes[c as usize] = Some(q);
                 let placed = onto_plane_sets(topo, fc, planes, pos, verts, opts.tol);
+                let layout = Layout {
+                    topo,
+                    faces,
+                    fc,
+                    planes,
+                    vc: &vc,
+                    on_border: &on_border,
+                    input,
+                    min_area,
+                };
                 let keep = placed
                     && settle(
-                        topo,
-                        faces,
-                        fc,
-                        planes,
-                        input,
+                        &layout,
                         pos,
-                        min_area,
-                        &on_border,
-                        &vc,
                         &saved,
                         &scope,
                         &regions,
