@@ -146,9 +146,14 @@ pub fn split_region(
     let sum = members
         .iter()
         .fold([0.0; 3], |s, &f| add(s, scale(normals[f], areas[f])));
-    let Some(mean) = normalize(sum) else {
+    let total: f64 = members.iter().map(|&f| areas[f]).sum();
+    if total <= 0.0 || normalize(sum).is_none() {
         return false;
-    };
+    }
+    // The centroid of the normals (not the unit mean normal): the area-weighted deviations
+    // from it sum to zero, so faces lie on both sides of it along any direction. About the
+    // unit mean, a region that turns far (a "C") has all its deviations on one side.
+    let mean = scale(sum, 1.0 / total);
     let mut cov = [[0.0; 3]; 3];
     for &f in &members {
         let d = sub(normals[f], mean);

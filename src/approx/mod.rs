@@ -34,6 +34,7 @@ pub mod polygons;
 pub mod reassign;
 pub mod slide;
 pub mod sparse;
+pub mod split;
 pub mod untangle;
 pub mod untangle2d;
 pub mod vertex_update;
@@ -127,6 +128,9 @@ pub struct ApproxOptions {
     /// Largest number of two-face moves tried per round at the end (see
     /// [`dissolve::pair_moves`]); 0 = off.
     pub pair_move_trials: usize,
+    /// Largest number of regions tried for a split at the end, while fewer than K regions
+    /// are used (see [`split`]); 0 = off.
+    pub split_trials: usize,
     pub boundary: BoundaryL0Options,
 }
 
@@ -147,6 +151,7 @@ impl ApproxOptions {
             dissolve_max_faces: 200,
             nudge_trials: 2000,
             pair_move_trials: 400,
+            split_trials: 16,
             max_split_passes: 4,
             split_per_pass: 1,
             corner_reach_rel: 0.04,
@@ -482,7 +487,15 @@ fn run_once(
             &mut pl.positions,
             min_area,
         )?;
-        let moved = if opts.reassign_trials > 0 {
+        let folds = untangle::bad_faces(
+            &pl.positions,
+            &mesh.faces,
+            &face_cluster,
+            &pl.planes,
+            min_area,
+        )
+        .len();
+        let moved = if opts.reassign_trials > 0 && folds <= FOLD_MOVES_MAX_BAD {
             // The barrier repair of moves is kept for the final pass (below).
             fold_moves(&mut face_cluster, &mut pl, 0)?
         } else {
@@ -498,6 +511,16 @@ fn run_once(
             min_area,
         );
         let nbad = bad.len();
+        // After a split that folds far more than the best pass (rocker_arm K = 24: 2 bad faces,
+        // then 657 after splitting one region), the passes would build on the worse partition
+        // (576, 568, 516 bad, 15–35 s each): stop and keep the best.
+        if split_passes > 0
+            && best
+                .as_ref()
+                .is_some_and(|b| nbad > SPLIT_GIVE_UP_FACTOR * b.0 + SPLIT_GIVE_UP_SLACK)
+        {
+            break;
+        }
         let better = best.as_ref().map_or(true, |b| nbad < b.0);
         let mut bad_regions: Vec<u32> = bad.iter().map(|&f| face_cluster[f]).collect();
         bad_regions.sort_unstable();
@@ -557,7 +580,7 @@ fn run_once(
     // worse; they run here rather than in every pass because they are slower and would change
     // which regions the next passes split.
     let mut slides_kept = 0;
-    if nbad > 0 && opts.slide_radius > 0 {
+    if nbad > 0 && nbad <= FOLD_MOVES_MAX_BAD && opts.slide_radius > 0 {
         let t = Instant::now();
         if opts.reassign_trials > 0 {
             let moved = fold_moves(&mut face_cluster, &mut pl, opts.slide_repairs)?;
@@ -648,6 +671,34 @@ fn run_once(
                 opts.pair_move_trials,
             )?;
             faces_moved += 2 * k;
+        }
+        // Regions in use (face moves may have emptied some without renumbering).
+        let mut used = vec![false; pl.planes.len()];
+        for &c in &face_cluster {
+            used[c as usize] = true;
+        }
+        let budget = opts.k.saturating_sub(used.iter().filter(|&&u| u).count());
+        if opts.split_trials > 0 && budget > 0 && count_bad(&pl, &face_cluster) > 0 {
+            let s = split::split_folded_regions(
+                topo,
+                &mesh.faces,
+                &mut face_cluster,
+                &mut pl.planes,
+                &mesh.positions,
+                &mut pl.positions,
+                min_area,
+                &n0,
+                &a0,
+                &split::SplitOptions {
+                    budget,
+                    tol: 1e-8 * diag,
+                    max_trials: opts.split_trials,
+                },
+            )?;
+            if s > 0 {
+                n_clusters = renumber_with_planes(&mut face_cluster, &mut pl.planes);
+            }
+            regions_split += s;
         }
         times.planarize += t.elapsed().as_secs_f64();
         if count_bad(&pl, &face_cluster) >= before {
@@ -771,6 +822,17 @@ fn run_once(
         report,
     })
 }
+
+/// Most bad faces for which a pass runs its fold moves (and the kept pass its slides). Above,
+/// the partition itself folds: block K = 24 seed 2 has 643–1 443 bad faces per pass, and the
+/// moves took 15–36 s per pass to leave 588 — the run is not kept when another seed does
+/// better, and a run that bad is no answer either way.
+const FOLD_MOVES_MAX_BAD: usize = 400;
+
+/// A split pass leaving more than this × the best pass's bad faces, plus
+/// [`SPLIT_GIVE_UP_SLACK`], ends the passes (see `run_once`).
+const SPLIT_GIVE_UP_FACTOR: usize = 2;
+const SPLIT_GIVE_UP_SLACK: usize = 20;
 
 /// Most bad faces left for which the plane nudges and region dissolves run (see `approximate`).
 const END_REPAIR_MAX_BAD: usize = 64;

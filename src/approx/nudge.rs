@@ -4,8 +4,9 @@
 //! corners of the same chain (points where three planes meet) nearly coincide or come in the
 //! wrong order, the faces between them fold wherever the vertices go; the cure is to move the
 //! corners, i.e. the planes. A small coordinate search does that: for a region at a bad face,
-//! rotate its plane about its centroid by a few angles around its two in-plane axes, or shift
-//! it along its normal; put the region's vertices onto their new plane sets (a vertex of one
+//! rotate its plane about its centroid by a few angles around its two in-plane axes (and about
+//! its vertices on four or more planes, which only stay feasible while every plane through
+//! them turns about them), or shift it along its normal; put the region's vertices onto their new plane sets (a vertex of one
 //! region orthogonally, of two onto the new line, of three onto the new point); repair as after
 //! a face move ([`super::dissolve::settle`]); keep the first change that leaves fewer bad faces
 //! in the region and its neighbours. Planarity stays exact; the approximation error changes a
@@ -122,16 +123,18 @@ pub fn nudge_planes(
                     .map(|&x| norm(sub(x, centroid)))
                     .fold(0.0, f64::max);
             let mut trials: Vec<Plane> = Vec::new();
-            for &a in &opts.angles {
-                for axis in [frame.u, frame.v] {
-                    for s in [a, -a] {
-                        // Rodrigues about an in-plane axis (perpendicular to n).
-                        let n = add(scale(p.n, s.cos()), scale(cross(axis, p.n), s.sin()));
-                        if let Some(n) = normalize(n) {
-                            trials.push(Plane {
-                                n,
-                                d: -dot(n, centroid),
-                            });
+            for (pivot, axes) in pivots(&p, &frame, centroid, verts, &vc, pos) {
+                for &a in &opts.angles {
+                    for &axis in &axes {
+                        for s in [a, -a] {
+                            // Rodrigues about an in-plane axis (perpendicular to n).
+                            let n = add(scale(p.n, s.cos()), scale(cross(axis, p.n), s.sin()));
+                            if let Some(n) = normalize(n) {
+                                trials.push(Plane {
+                                    n,
+                                    d: -dot(n, pivot),
+                                });
+                            }
                         }
                     }
                 }
@@ -188,11 +191,97 @@ pub fn nudge_planes(
     Ok(out)
 }
 
+/// The points a plane is rotated about, each with its in-plane axes. The region's centroid
+/// (both axes) comes first. Then its over-determined vertices — on four or more planes, which
+/// can only stay on all of them while every plane through them keeps passing through them: one
+/// such vertex is a pivot with both axes, two are an axis through both; with more, rotations
+/// would move one of them off its planes, so only shifts and the centroid remain.
+fn pivots(
+    p: &Plane,
+    frame: &Frame,
+    centroid: V3,
+    verts: &[u32],
+    vc: &[Vec<u32>],
+    pos: &[V3],
+) -> Vec<(V3, Vec<V3>)> {
+    let mut out = vec![(centroid, vec![frame.u, frame.v])];
+    let over: Vec<V3> = verts
+        .iter()
+        .filter(|&&v| vc[v as usize].len() >= 4)
+        .map(|&v| pos[v as usize])
+        .collect();
+    match over.as_slice() {
+        [a] => out.push((*a, vec![frame.u, frame.v])),
+        [a, b] => {
+            // The axis through both, kept in the plane (both lie on it up to the tolerance).
+            let d = sub(*b, *a);
+            if let Some(axis) = normalize(sub(d, scale(p.n, dot(d, p.n)))) {
+                out.push((*a, vec![axis]));
+            }
+        }
+        _ => {}
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::approx::slide::tests::grid_book;
     use crate::mesh::TriMesh;
+
+    /// Rotations about the pivots keep the over-determined vertices on the plane: one such
+    /// vertex is a pivot with both in-plane axes, two give the axis through both.
+    #[test]
+    fn pivots_keep_over_determined_vertices_on_the_rotated_plane() {
+        let p = Plane {
+            n: [0.0, 0.0, 1.0],
+            d: -0.5,
+        };
+        let frame = Frame::of(&p).unwrap();
+        let pos = vec![
+            [0.0, 0.0, 0.5],
+            [1.0, 0.2, 0.5],
+            [0.3, 1.0, 0.5],
+            [2.0, 2.0, 0.5],
+        ];
+        let many = vec![0, 1, 2, 3];
+        let rotate = |pivot: V3, axis: V3, s: f64| {
+            let n = normalize(add(scale(p.n, s.cos()), scale(cross(axis, p.n), s.sin()))).unwrap();
+            Plane {
+                n,
+                d: -dot(n, pivot),
+            }
+        };
+        // Vertex 1 on four planes.
+        let vc = vec![vec![0], vec![0, 1, 2, 3], vec![0, 1], vec![0]];
+        let centroid = [0.8, 0.8, 0.5];
+        let ps = pivots(&p, &frame, centroid, &[0, 1, 2, 3], &vc, &pos);
+        assert_eq!(ps.len(), 2);
+        assert_eq!(ps[0].0, centroid);
+        assert_eq!((ps[1].0, ps[1].1.len()), (pos[1], 2));
+        for &axis in &ps[1].1 {
+            let q = rotate(ps[1].0, axis, 0.2);
+            assert!(q.signed_distance(pos[1]).abs() < 1e-12);
+            assert!(q.signed_distance(pos[3]).abs() > 1e-3);
+        }
+        // Vertices 1 and 3 on four planes: one axis, through both.
+        let vc2 = vec![vec![0], vec![0, 1, 2, 3], vec![0, 1], vec![0, 4, 5, 6]];
+        let ps = pivots(&p, &frame, centroid, &[0, 1, 2, 3], &vc2, &pos);
+        assert_eq!((ps.len(), ps[1].1.len()), (2, 1));
+        let q = rotate(ps[1].0, ps[1].1[0], -0.3);
+        for v in [1, 3] {
+            assert!(q.signed_distance(pos[v]).abs() < 1e-12, "vertex {v}");
+        }
+        // Three: no pivot beyond the centroid.
+        let vc3 = vec![
+            vec![0, 7, 8, 9],
+            vec![0, 1, 2, 3],
+            vec![0, 1],
+            vec![0, 4, 5, 6],
+        ];
+        assert_eq!(pivots(&p, &frame, centroid, &many, &vc3, &pos).len(), 1);
+    }
 
     /// A two-page book whose page B plane is shifted so that the spine (where the pages meet)
     /// lands past page A's first row: faces of page A between them flip, and the row's border
