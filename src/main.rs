@@ -535,8 +535,8 @@ struct ApproxArgs {
     /// Seed of the region-growing order.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Further runs with seeds seed+1, seed+2, … while the best run so far has ≥ 4 flipped or
-    /// degenerate faces (the best run is written; 0 = one run only).
+    /// Further runs with seeds seed+1, seed+2, … while the best run so far has a flipped or
+    /// degenerate face (the best run is written; 0 = one run only).
     #[arg(long, default_value_t = 4)]
     restarts: usize,
     /// Region-growing / merge angle in degrees.

@@ -140,7 +140,7 @@ impl ApproxOptions {
             k,
             seed: 1,
             restarts: 4,
-            restart_min_bad: 4,
+            restart_min_bad: 1,
             angle_deg: 20.0,
             normals: NormalL0Options::default(),
             vertices: VertexUpdateOptions::default(),
@@ -305,8 +305,10 @@ pub struct ApproxOutput {
 ///
 /// Why restarts: which faces seed the regions decides the partition, and on curved CAD parts
 /// some partitions cannot be made planar without folds while others can (block K = 24: 70, 497,
-/// 13 and 0 bad faces on seeds 1–4). A handful of folds is left alone: restarts rarely remove
-/// those (bunny_npm: 1–7 on every seed) and each costs a whole run.
+/// 13 and 0 bad faces on seeds 1–4), and even a single fold left by the end repairs often
+/// is absent on the next seed (bunny_npm K = 100: 1, 0, 0, 2, 2 bad faces on seeds 1–5).
+/// Each restart costs a whole run; runs that fold only a little are cheap (the expensive
+/// repairs are skipped where hundreds of faces fold).
 pub fn approximate(
     mesh: &TriMesh,
     topo: &Topology,
