@@ -264,7 +264,8 @@ pub struct ApproxReport {
     pub regions_untangled: usize,
     /// Lloyd rounds that changed the partition (see [`lloyd`]).
     pub lloyd_rounds: usize,
-    /// Folding regions split in two with unused budget, and the passes that did it.
+    /// Folding regions split in two with unused budget (by the split passes and at the end,
+    /// see [`split`]), and the passes that did it.
     pub regions_split: usize,
     pub split_passes: usize,
     /// Passes that merged still-folding regions into a neighbour.
