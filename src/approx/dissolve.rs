@@ -20,7 +20,7 @@ use std::collections::BinaryHeap;
 
 use super::cluster::{regions_at, vertex_clusters};
 use super::geom::{dot, face_area_normal, normalize, Plane, V3};
-use super::reassign::{faces_around, fans, onto_plane_sets};
+use super::reassign::{faces_around, no_pinches, onto_plane_sets};
 use super::slide::slide_near;
 use super::untangle::{
     bad_faces, bad_faces_among, border_vertices, repair_patches, respace_chains, Layout,
@@ -203,13 +203,7 @@ pub(super) fn try_relabel(
         }
         pos.copy_from_slice(&saved);
     };
-    let simple = verts.iter().all(|&v| {
-        regions_at(topo, fc, v).iter().all(|&c| {
-            let inside = |h: usize| fc[h] == c;
-            fans(topo, faces, v, &inside) <= 1
-        })
-    });
-    if !simple {
+    if !no_pinches(topo, faces, fc, &verts) {
         restore(fc, pos);
         return Ok(false);
     }

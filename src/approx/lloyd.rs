@@ -23,7 +23,7 @@ use super::geom::{add, normalize, scale, sub, V3};
 use crate::mesh::{Topology, NO_FACE};
 
 /// Edge-neighbour faces of `f`.
-fn neighbors(topo: &Topology, f: usize) -> impl Iterator<Item = usize> + '_ {
+pub(super) fn neighbors(topo: &Topology, f: usize) -> impl Iterator<Item = usize> + '_ {
     topo.face_edges[f].iter().filter_map(move |&e| {
         let [a, b] = topo.edge_faces[e as usize];
         let g = if a as usize == f { b } else { a };

@@ -106,6 +106,23 @@ pub(super) fn faces_around(topo: &Topology, faces: &[[u32; 3]], f0: usize) -> Ve
     out
 }
 
+/// Whether every region of `labels` around each vertex of `verts` forms one fan there (no
+/// region pinched at a vertex: its outline would touch itself, which no layout in its plane
+/// can realise without a fold).
+pub(super) fn no_pinches(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    labels: &[u32],
+    verts: &[u32],
+) -> bool {
+    verts.iter().all(|&v| {
+        regions_at(topo, labels, v).iter().all(|&c| {
+            let inside = |h: usize| labels[h] == c;
+            fans(topo, faces, v, &inside) <= 1
+        })
+    })
+}
+
 /// Number of contiguous fans of faces satisfying `inside` around vertex `v` (0 when none;
 /// 1 when all). Each fan ends where the edge leaving `v` in face order leads to a face outside
 /// (or to no face: the mesh border). Needs consistently oriented faces (validated input).

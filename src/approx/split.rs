@@ -17,10 +17,10 @@ use super::cluster::{regions_at, vertex_clusters};
 use super::dissolve::settle;
 use super::geom::{add, fit_plane, scale, Plane, V3};
 use super::lloyd;
-use super::reassign::{fans, onto_plane_sets};
+use super::reassign::{no_pinches, onto_plane_sets};
 use super::untangle::{bad_faces, bad_faces_among, border_vertices, Layout};
 use crate::linalg::SolveError;
-use crate::mesh::{Topology, NO_FACE};
+use crate::mesh::Topology;
 
 /// Options of [`split_folded_regions`].
 #[derive(Clone, Debug, PartialEq)]
@@ -119,14 +119,7 @@ fn try_split(
     let mut verts: Vec<u32> = members.iter().flat_map(|&f| faces[f]).collect();
     verts.sort_unstable();
     verts.dedup();
-    // Every region must stay one fan around each vertex (no pinches).
-    let simple = verts.iter().all(|&v| {
-        regions_at(topo, &labels, v).iter().all(|&c| {
-            let inside = |h: usize| labels[h] == c;
-            fans(topo, faces, v, &inside) <= 1
-        })
-    });
-    if !simple {
+    if !no_pinches(topo, faces, &labels, &verts) {
         return Ok(false);
     }
     let fit = |half: &[usize]| {
@@ -202,11 +195,9 @@ fn connected(topo: &Topology, labels: &[u32], half: &[usize]) -> bool {
     let mut seen = std::collections::HashSet::from([half[0]]);
     let mut stack = vec![half[0]];
     while let Some(f) = stack.pop() {
-        for &e in &topo.face_edges[f] {
-            let ef = topo.edge_faces[e as usize];
-            let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
-            if g != NO_FACE && labels[g as usize] == c && seen.insert(g as usize) {
-                stack.push(g as usize);
+        for g in lloyd::neighbors(topo, f) {
+            if labels[g] == c && seen.insert(g) {
+                stack.push(g);
             }
         }
     }
