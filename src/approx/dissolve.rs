@@ -182,16 +182,7 @@ pub(super) fn try_relabel(
     verts.dedup();
     // The faces that can change: those of every region at a moved face's vertex (the new
     // regions are among them: a face only moves to a region it touches).
-    let mut regions: Vec<u32> = verts
-        .iter()
-        .flat_map(|&v| regions_at(topo, fc, v))
-        .chain(moves.iter().map(|&(_, c)| c))
-        .collect();
-    regions.sort_unstable();
-    regions.dedup();
-    let scope: Vec<usize> = (0..fc.len())
-        .filter(|&f| regions.binary_search(&fc[f]).is_ok())
-        .collect();
+    let (regions, scope) = neighbourhood(topo, fc, &verts, moves.iter().map(|&(_, c)| c));
     let before = bad_faces_among(pos, faces, fc, planes, min_area, &scope).len();
     let saved = pos.to_vec();
     for &(f, c) in moves {
@@ -227,6 +218,27 @@ pub(super) fn try_relabel(
         restore(fc, pos);
     }
     Ok(keep)
+}
+
+/// The regions a change at `verts` can affect — every region at those vertices plus `extra`
+/// (sorted, deduplicated) — and all their faces (the scope [`settle`] judges).
+pub(super) fn neighbourhood(
+    topo: &Topology,
+    fc: &[u32],
+    verts: &[u32],
+    extra: impl Iterator<Item = u32>,
+) -> (Vec<u32>, Vec<usize>) {
+    let mut regions: Vec<u32> = verts
+        .iter()
+        .flat_map(|&v| regions_at(topo, fc, v))
+        .chain(extra)
+        .collect();
+    regions.sort_unstable();
+    regions.dedup();
+    let scope: Vec<usize> = (0..fc.len())
+        .filter(|&f| regions.binary_search(&fc[f]).is_ok())
+        .collect();
+    (regions, scope)
 }
 
 /// Two-face moves at the bad faces left: for each bad face, every face around its corners

@@ -13,8 +13,8 @@
 //! neighbourhood; planes stay exact, and the count of regions never exceeds K because each
 //! split spends one unit of the unused budget.
 
-use super::cluster::{regions_at, vertex_clusters};
-use super::dissolve::settle;
+use super::cluster::vertex_clusters;
+use super::dissolve::{neighbourhood, settle};
 use super::geom::{add, fit_plane, scale, Plane, V3};
 use super::lloyd;
 use super::reassign::{no_pinches, onto_plane_sets};
@@ -135,16 +135,7 @@ fn try_split(
     let (Some(fit_a), Some(fit_b)) = (fit(&halves[0]), fit(&halves[1])) else {
         return Ok(false);
     };
-    let mut regions: Vec<u32> = verts
-        .iter()
-        .flat_map(|&v| regions_at(topo, fc, v))
-        .chain([new])
-        .collect();
-    regions.sort_unstable();
-    regions.dedup();
-    let scope: Vec<usize> = (0..fc.len())
-        .filter(|&f| regions.binary_search(&fc[f]).is_ok())
-        .collect();
+    let (regions, scope) = neighbourhood(topo, fc, &verts, [new].into_iter());
     let before = bad_faces_among(pos, faces, fc, planes, min_area, &scope).len();
     let saved = pos.to_vec();
     let old_fc = fc.to_vec();
