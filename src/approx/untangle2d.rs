@@ -209,11 +209,19 @@ impl Barrier for Problem<'_> {
 
 /// Dot product, summed in pairs: the order of the 2D untangler's sums before it was written
 /// over flat vectors, kept so that its results stay bit-identical.
+/// (`chunks_exact`: the generic `chunks` version took a fifth of rocker_arm's run time.)
 fn dotv(a: &[f64], b: &[f64]) -> f64 {
-    a.chunks(2)
-        .zip(b.chunks(2))
-        .map(|(p, q)| p.iter().zip(q).map(|(x, y)| x * y).sum::<f64>())
-        .sum()
+    let (pa, pb) = (a.chunks_exact(2), b.chunks_exact(2));
+    let tail: f64 = pa
+        .remainder()
+        .iter()
+        .zip(pb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    pa.zip(pb)
+        .map(|(p, q)| p[0] * q[0] + p[1] * q[1])
+        .sum::<f64>()
+        + tail
 }
 
 /// One L-BFGS memory entry: step s, gradient change y, 1/(s·y).
