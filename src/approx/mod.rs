@@ -430,14 +430,7 @@ fn run_once(
     // its closest neighbour and the pass repeated — the "merging" answer to configurations
     // that exact planarity cannot realise without folds. The best pass is kept.
     let min_area = 1e-12 * diag * diag;
-    let mut best: Option<(
-        usize,
-        Vec<u32>,
-        usize,
-        boundary_l0::Planarized,
-        untangle::Untangled,
-        bool,
-    )> = None;
+    let mut best: Option<Pass> = None;
     let mut merge_passes = 0;
     let mut faces_moved = 0;
     let mut n_clusters = n_clusters;
@@ -534,13 +527,14 @@ fn run_once(
         if split_passes > 0
             && best
                 .as_ref()
-                .is_some_and(|b| nbad > SPLIT_GIVE_UP_FACTOR * b.0 + SPLIT_GIVE_UP_SLACK)
+                .is_some_and(|b| nbad > SPLIT_GIVE_UP_FACTOR * b.nbad + SPLIT_GIVE_UP_SLACK)
         {
             break;
         }
         // A few folds left: the end-stage repairs often clear them at a fraction of the cost
-        // of further passes (bunny_npm K = 60: 0.1 s against 1.2 s of split passes and
-        // slides). Tried on a copy; kept only when nothing folds afterwards.
+        // of further passes (bunny_npm K = 60: 0.1–0.7 s of nudges, where three split passes
+        // and 0.55 s of slides came first before). Tried on a copy; kept only when nothing
+        // folds afterwards.
         let tried = nbad > 0 && nbad <= EARLY_END_MAX_BAD;
         let (nbad, bad) = if tried {
             let mut fc_try = face_cluster.clone();
@@ -558,13 +552,20 @@ fn run_once(
         } else {
             (nbad, bad)
         };
-        let better = best.as_ref().map_or(true, |b| nbad < b.0);
+        let better = best.as_ref().map_or(true, |b| nbad < b.nbad);
         let mut bad_regions: Vec<u32> = bad.iter().map(|&f| face_cluster[f]).collect();
         bad_regions.sort_unstable();
         bad_regions.dedup();
         let fc_now = face_cluster.clone();
         if better {
-            best = Some((nbad, fc_now, n_clusters, pl, ut, tried));
+            best = Some(Pass {
+                nbad,
+                fc: fc_now,
+                n_clusters,
+                pl,
+                ut,
+                repaired: tried,
+            });
         }
         if nbad == 0 {
             break;
@@ -608,7 +609,15 @@ fn run_once(
         times.cluster += t.elapsed().as_secs_f64();
     }
     // `best` is set in the first pass, which always runs.
-    let Some((nbad, mut face_cluster, n_clusters, mut pl, ut, tried)) = best else {
+    let Some(Pass {
+        nbad,
+        fc: mut face_cluster,
+        n_clusters,
+        mut pl,
+        ut,
+        repaired,
+    }) = best
+    else {
         return Err(ApproxError::BadInput("no planarization pass ran".into()));
     };
     // Last, on the kept pass only: fold moves again, now also repaired by the barrier untangler
@@ -641,7 +650,7 @@ fn run_once(
     // Then the end-stage repairs ([`EndStage::repair`]). They are deterministic: when the kept
     // pass already had them (the early attempt above) and nothing changed since, they would
     // only repeat that failed attempt.
-    let r = if tried && !changed && slides_kept == 0 {
+    let r = if repaired && !changed && slides_kept == 0 {
         EndRepairs::default()
     } else {
         end.repair(&mut face_cluster, &mut pl, &mut times)?
@@ -861,6 +870,17 @@ mod tests {
         assert!(split_candidates(&bad, &face_cluster, 4, 0).is_empty());
         assert!(split_candidates(&[], &face_cluster, 4, 5).is_empty());
     }
+}
+
+/// One planarization pass of `run_once`, as kept when it has the fewest bad faces so far.
+struct Pass {
+    nbad: usize,
+    fc: Vec<u32>,
+    n_clusters: usize,
+    pl: boundary_l0::Planarized,
+    ut: untangle::Untangled,
+    /// The end-stage repairs already ran on exactly this state (and left folds).
+    repaired: bool,
 }
 
 /// What the end-stage repairs did (see [`EndStage::repair`]).
