@@ -497,14 +497,7 @@ fn run_once(
             &mut pl.positions,
             min_area,
         )?;
-        let folds = untangle::bad_faces(
-            &pl.positions,
-            &mesh.faces,
-            &face_cluster,
-            &pl.planes,
-            min_area,
-        )
-        .len();
+        let folds = end.count_bad(&pl, &face_cluster);
         let moved = if opts.reassign_trials > 0 && folds <= FOLD_MOVES_MAX_BAD {
             // The barrier repair of moves is kept for the final pass (below).
             fold_moves(&mut face_cluster, &mut pl, 0)?
