@@ -9,7 +9,13 @@ fn main() {
     let k: usize = a[2].parse().unwrap();
     let m = mesh::read_obj(path).unwrap();
     let topo = Topology::build(&m, path).unwrap();
-    let out = approx::approximate(&m, &topo, &ApproxOptions::new(k), &mut |_| {}).unwrap();
+    // Optional 4th argument: one run with this seed (no restarts).
+    let mut opts = ApproxOptions::new(k);
+    if let Some(s) = a.get(4) {
+        opts.seed = s.parse().unwrap();
+        opts.restarts = 0;
+    }
+    let out = approx::approximate(&m, &topo, &opts, &mut |_| {}).unwrap();
     let diag = geom::bbox_diagonal(&m);
     let bad = untangle::bad_faces(
         &out.positions,

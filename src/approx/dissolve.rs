@@ -13,7 +13,9 @@
 //! than K).
 //!
 //! The same relabel-and-repair step ([`try_relabel`]) also drives two-face moves
-//! ([`pair_moves`]), for the folds a one-face move cannot leave.
+//! ([`pair_moves`]), for the folds a one-face move cannot leave, whole-region moves into one
+//! neighbour ([`absorb_regions`]) and the moves of a vertex's whole ring into one region
+//! ([`ring_moves`]).
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -305,6 +307,133 @@ pub fn pair_moves(
     Ok(kept)
 }
 
+/// Whole-region moves at the bad faces left: each region at a bad face's vertices with at most
+/// `max_faces` faces goes entirely into one neighbour (closest plane normal first), keeping
+/// every plane. Where [`dissolve_folded_regions`] hands each face to its own closest neighbour,
+/// here the region's outline disappears as a whole, so the vertices that were on its outline
+/// go onto planes they already neighboured; that keeps the chains of one boundary together
+/// (rocker_arm K = 100 seed 1: four regions of 35–172 faces go this way and, with five ring
+/// moves, the run ends without a fold). At most `max_trials` moves are tried; returns those
+/// kept (the regions are left empty: the caller renumbers).
+#[allow(clippy::too_many_arguments)]
+pub fn absorb_regions(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    tol: f64,
+    max_faces: usize,
+    max_trials: usize,
+) -> Result<usize, SolveError> {
+    let on_border = border_vertices(topo);
+    let (mut trials, mut kept) = (0, 0);
+    for f0 in bad_faces(pos, faces, fc, planes, min_area) {
+        if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
+            continue;
+        }
+        let mut regs: Vec<u32> = faces[f0]
+            .iter()
+            .flat_map(|&w| regions_at(topo, fc, w))
+            .collect();
+        regs.sort_unstable();
+        regs.dedup();
+        'regions: for r in regs {
+            let Some(pr) = planes[r as usize] else {
+                continue;
+            };
+            let members: Vec<usize> = (0..fc.len()).filter(|&h| fc[h] == r).collect();
+            if members.len() > max_faces {
+                continue;
+            }
+            let mut targets: Vec<(u32, f64)> = members
+                .iter()
+                .flat_map(|&h| faces[h].iter().flat_map(|&w| regions_at(topo, fc, w)))
+                .filter(|&t| t != r)
+                .filter_map(|t| planes[t as usize].map(|p| (t, dot(p.n, pr.n))))
+                .collect();
+            targets.sort_unstable_by_key(|&(t, _)| t);
+            targets.dedup_by_key(|&mut (t, _)| t);
+            targets.sort_by(|a, b| b.1.total_cmp(&a.1));
+            for (t, _) in targets {
+                if trials >= max_trials {
+                    return Ok(kept);
+                }
+                trials += 1;
+                let moves: Vec<(usize, u32)> = members.iter().map(|&h| (h, t)).collect();
+                if try_relabel(
+                    topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
+                )? {
+                    kept += 1;
+                    break 'regions;
+                }
+            }
+        }
+    }
+    Ok(kept)
+}
+
+/// Ring moves at the bad faces left: for each vertex of a bad face and each region there, every
+/// face around the vertex goes into that region, which makes the vertex interior to it. Why: a
+/// region whose corner in its plane needs a reflex angle (its two boundary lines leave the
+/// corner on a saddle of planes) cannot cover it with the single face it has there — a
+/// triangle spans less than 180° — and a one- or two-face move at that corner takes the corner
+/// off a plane or puts a neighbour on four; absorbing the ring of the face's vertex on a
+/// boundary line gives the region a second face there with an interior vertex between them.
+/// Rings of more than `max_ring` faces to move are skipped; at most `max_trials` rings are
+/// tried; returns the rings kept.
+#[allow(clippy::too_many_arguments)]
+pub fn ring_moves(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    tol: f64,
+    max_ring: usize,
+    max_trials: usize,
+) -> Result<usize, SolveError> {
+    let on_border = border_vertices(topo);
+    let (mut trials, mut kept) = (0, 0);
+    for f0 in bad_faces(pos, faces, fc, planes, min_area) {
+        if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
+            continue;
+        }
+        'verts: for w in faces[f0] {
+            for c in regions_at(topo, fc, w) {
+                if planes[c as usize].is_none() {
+                    continue;
+                }
+                let moves: Vec<(usize, u32)> = topo
+                    .vertex_faces(w)
+                    .iter()
+                    .map(|&h| h as usize)
+                    .filter(|&h| fc[h] != c)
+                    .map(|h| (h, c))
+                    .collect();
+                if moves.is_empty() || moves.len() > max_ring {
+                    continue;
+                }
+                if trials >= max_trials {
+                    return Ok(kept);
+                }
+                trials += 1;
+                if try_relabel(
+                    topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
+                )? {
+                    kept += 1;
+                    break 'verts;
+                }
+            }
+        }
+    }
+    Ok(kept)
+}
+
 /// After a change of regions or planes that put the vertices it touched onto their plane sets:
 /// re-spaces the chains, repairs what folds in `scope` (Tutte patches, then the barrier
 /// untangler across boundaries) and says whether the change is worth keeping — fewer bad faces
@@ -454,10 +583,65 @@ mod tests {
         assert!(pos.iter().all(|p| p[2].abs() < 1e-9));
     }
 
-    /// Two-face moves on tangled two-page books: never more bad faces, every vertex on its
-    /// planes, some moves kept; nothing changes on a clean layout.
+    /// The same collapsed inner region, moved whole: into its only neighbour, which leaves a
+    /// flat fold-free grid with one region; a size limit below the region's leaves it alone.
     #[test]
-    fn pair_moves_never_add_folds_and_keep_planes() {
+    fn absorb_moves_a_collapsed_region_whole_into_its_neighbour() {
+        let m = flat_grid(4);
+        let topo = Topology::build(&m, std::path::Path::new("grid")).unwrap();
+        let centre = 12u32;
+        let fc0: Vec<u32> = m
+            .faces
+            .iter()
+            .map(|f| u32::from(f.contains(&centre)))
+            .collect();
+        let n = normalize([0.0, -0.4, 1.0]).unwrap();
+        let planes = vec![
+            Some(Plane {
+                n: [0.0, 0.0, 1.0],
+                d: 0.0,
+            }),
+            Some(Plane {
+                n,
+                d: -dot(n, m.positions[centre as usize]),
+            }),
+        ];
+        let mut pos0 = m.positions.clone();
+        let all: Vec<u32> = (0..pos0.len() as u32).collect();
+        assert!(onto_plane_sets(&topo, &fc0, &planes, &mut pos0, &all, 1e-9));
+        let min_area = 1e-9;
+        assert!(bad_faces(&pos0, &m.faces, &fc0, &planes, min_area).len() >= 2);
+        let run = |max_faces| {
+            let (mut fc, mut pos) = (fc0.clone(), pos0.clone());
+            let k = absorb_regions(
+                &topo,
+                &m.faces,
+                &mut fc,
+                &planes,
+                &m.positions,
+                &mut pos,
+                min_area,
+                1e-9,
+                max_faces,
+                8,
+            )
+            .unwrap();
+            (k, fc, pos)
+        };
+        assert_eq!(run(5), (0, fc0.clone(), pos0.clone()));
+        let (k, fc, pos) = run(6);
+        assert_eq!(k, 1);
+        assert!(fc.iter().all(|&c| c == 0));
+        assert!(bad_faces(&pos, &m.faces, &fc, &planes, min_area).is_empty());
+        assert!(pos.iter().all(|p| p[2].abs() < 1e-9));
+    }
+
+    /// A face-move repair on tangled two-page books: never more bad faces, every vertex on its
+    /// planes, some moves kept; nothing changes on a clean layout.
+    fn moves_on_tangled_books(
+        name: &str,
+        mv: impl Fn(&Topology, &[[u32; 3]], &mut [u32], &[Option<Plane>], &[V3], &mut [V3]) -> usize,
+    ) {
         let (input, faces, fc0, planes) = crate::approx::slide::tests::grid_book(5);
         let mesh = TriMesh {
             positions: input.clone(),
@@ -465,11 +649,8 @@ mod tests {
         };
         let topo = Topology::build(&mesh, std::path::Path::new("book")).unwrap();
         let (mut fc, mut pos) = (fc0.clone(), input.clone());
-        let kept = pair_moves(
-            &topo, &faces, &mut fc, &planes, &input, &mut pos, 1e-12, 1e-9, 100,
-        )
-        .unwrap();
-        assert_eq!((kept, &fc, &pos), (0, &fc0, &input));
+        let kept = mv(&topo, &faces, &mut fc, &planes, &input, &mut pos);
+        assert_eq!((kept, &fc, &pos), (0, &fc0, &input), "{name}");
         let border = border_vertices(&topo);
         let mut rnd = crate::approx::slide::tests::uniform(99);
         let mut moved = 0;
@@ -488,23 +669,34 @@ mod tests {
                 }
             }
             let before = bad_faces(&pos, &faces, &fc, &planes, 1e-12).len();
-            let k = pair_moves(
-                &topo, &faces, &mut fc, &planes, &input, &mut pos, 1e-12, 1e-9, 200,
-            )
-            .unwrap();
+            let k = mv(&topo, &faces, &mut fc, &planes, &input, &mut pos);
             let after = bad_faces(&pos, &faces, &fc, &planes, 1e-12).len();
             moved += k;
-            assert!(after <= before, "trial {trial}: {before} -> {after}");
+            assert!(after <= before, "{name} trial {trial}: {before} -> {after}");
             for (v, p) in pos.iter().enumerate() {
                 for c in regions_at(&topo, &fc, v as u32) {
                     let d = planes[c as usize].unwrap().signed_distance(*p);
                     assert!(
                         d.abs() < 1e-9,
-                        "trial {trial}: vertex {v} off plane {c}: {d}"
+                        "{name} trial {trial}: vertex {v} off plane {c}: {d}"
                     );
                 }
             }
         }
-        assert!(moved >= 3, "only {moved} pair moves kept");
+        assert!(moved >= 3, "{name}: only {moved} moves kept");
+    }
+
+    #[test]
+    fn pair_moves_never_add_folds_and_keep_planes() {
+        moves_on_tangled_books("pair", |topo, faces, fc, planes, input, pos| {
+            pair_moves(topo, faces, fc, planes, input, pos, 1e-12, 1e-9, 200).unwrap()
+        });
+    }
+
+    #[test]
+    fn ring_moves_never_add_folds_and_keep_planes() {
+        moves_on_tangled_books("ring", |topo, faces, fc, planes, input, pos| {
+            ring_moves(topo, faces, fc, planes, input, pos, 1e-12, 1e-9, 8, 200).unwrap()
+        });
     }
 }
