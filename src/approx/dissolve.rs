@@ -12,7 +12,7 @@
 //! Planes stay as they are; the dissolved region is left empty (one region fewer, so never more
 //! than K).
 //!
-//! The same relabel-and-repair step ([`try_relabel`]) also drives two-face moves
+//! The same relabel-and-repair step (`try_relabel`) also drives two-face moves
 //! ([`pair_moves`]), for the folds a one-face move cannot leave, whole-region moves into one
 //! neighbour ([`absorb_regions`]) and the moves of a vertex's whole ring into one region
 //! ([`ring_moves`]).

@@ -8,7 +8,7 @@
 //! its vertices on four or more planes, which only stay feasible while every plane through
 //! them turns about them), or shift it along its normal; put the region's vertices onto their new plane sets (a vertex of one
 //! region orthogonally, of two onto the new line, of three onto the new point); repair as after
-//! a face move ([`super::dissolve::settle`]); keep the first change that leaves fewer bad faces
+//! a face move (`dissolve::settle`); keep the first change that leaves fewer bad faces
 //! in the region and its neighbours. Planarity stays exact; the approximation error changes a
 //! little (the plane no longer is the region's best fit).
 

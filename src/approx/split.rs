@@ -6,7 +6,7 @@
 //! does not undo that. Two planes can: the region is split in two along the direction in which
 //! its input normals spread ([`lloyd::split_region`]), each half gets a plane and the region's
 //! vertices go onto their new plane sets, then the folds around are repaired as after a face
-//! move ([`settle`]). Three choices of planes are tried, the first kept: the old plane for
+//! move (`dissolve::settle`). Three choices of planes are tried, the first kept: the old plane for
 //! one half and a fit for the other (both ways round; the kept half's vertices barely move),
 //! then a fit for both (its vertices projected from the input, since the flattened layout is
 //! the one that folds). The change is kept only where it leaves fewer bad faces in the region's

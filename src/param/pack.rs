@@ -6,7 +6,7 @@
 //! rectangle has a side on the hull; Freeman & Shapira 1975), laid flat (width ≥ height), and
 //! the boxes are packed into shelves, tallest first (next-fit decreasing height). The strip
 //! width is chosen among candidates to make the result as square as possible, and the margin
-//! is kept between boxes and around the border, in the final [0,1]² units. Boxes are disjoint,
+//! is kept between boxes and around the border, in the final `[0, 1]²` units. Boxes are disjoint,
 //! so charts are too (each chart lies inside its box).
 #![forbid(unsafe_code)]
 
@@ -28,7 +28,7 @@ impl Default for PackOptions {
 pub struct Packing {
     /// Σ chart UV area / area of the unit square, after packing.
     pub efficiency: f64,
-    /// Lower-left corner and size of each chart's box in [0,1]².
+    /// Lower-left corner and size of each chart's box in `[0, 1]²`.
     pub boxes: Vec<[f64; 4]>,
 }
 
@@ -40,7 +40,7 @@ pub struct ChartRef<'a> {
     pub area_3d: f64,
 }
 
-/// Packs the charts of `uv` in place into [0,1]². Each vertex must belong to one chart.
+/// Packs the charts of `uv` in place into `[0, 1]²`. Each vertex must belong to one chart.
 pub fn pack(uv: &mut [[f64; 2]], charts: &[ChartRef], opts: &PackOptions) -> Packing {
     let margin = opts.margin.clamp(0.0, 0.2);
     // Scale to 3D area, rotate to the minimal box, move the box's corner to the origin.

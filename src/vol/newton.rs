@@ -205,7 +205,7 @@ pub struct Pattern {
     pub n: usize,
     pub indptr: Vec<usize>,
     pub indices: Vec<usize>,
-    /// Per tet, per corner pair (i, j): position of b = tet[j] in a = tet[i]'s neighbour list.
+    /// Per tet, per corner pair (i, j): position of b = `tet[j]` in a = `tet[i]`'s neighbour list.
     pub slot: Vec<[[u32; 4]; 4]>,
 }
 
