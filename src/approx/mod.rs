@@ -669,6 +669,17 @@ fn run_once(
     faces_moved += early.faces_moved + r.faces_moved;
     regions_split += early.regions_split + r.regions_split;
     let n_clusters = r.n_clusters.unwrap_or(n_clusters);
+    // Face moves (fold, pair and ring moves) can empty a region without renumbering; the
+    // count reported and the polygons are of the regions in use.
+    let mut used = vec![false; pl.planes.len().max(n_clusters)];
+    for &c in &face_cluster {
+        used[c as usize] = true;
+    }
+    let n_clusters = if used.iter().filter(|&&u| u).count() < n_clusters {
+        renumber_with_planes(&mut face_cluster, &mut pl.planes)
+    } else {
+        n_clusters
+    };
 
     progress(Stage::Polygons);
     let t = Instant::now();
