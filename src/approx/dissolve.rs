@@ -260,7 +260,6 @@ pub fn pair_moves(
     tol: f64,
     max_trials: usize,
 ) -> Result<usize, SolveError> {
-    let on_border = border_vertices(topo);
     let edge_neighbors = |f: usize| {
         topo.face_edges[f].map(|e| {
             let ef = topo.edge_faces[e as usize];
@@ -268,14 +267,10 @@ pub fn pair_moves(
             (g != NO_FACE).then_some(g as usize)
         })
     };
-    let (mut trials, mut kept) = (0, 0);
-    let bad = bad_faces(pos, faces, fc, planes, min_area);
-    for f0 in bad {
-        if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
-            continue;
-        }
+    let pairs = |fc: &[u32], f0: usize| {
+        let mut out = Vec::new();
         let cands = faces_around(topo, faces, f0);
-        'pairs: for &g in &cands {
+        for &g in &cands {
             for h in edge_neighbors(g).into_iter().flatten() {
                 if fc[h] != fc[g] || h < g && cands.contains(&h) {
                     continue; // other region, or this pair comes up from h's side
@@ -288,23 +283,14 @@ pub fn pair_moves(
                     .collect();
                 targets.sort_unstable();
                 targets.dedup();
-                for to in targets {
-                    if trials >= max_trials {
-                        return Ok(kept);
-                    }
-                    trials += 1;
-                    let moves = [(g, to), (h, to)];
-                    if try_relabel(
-                        topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
-                    )? {
-                        kept += 1;
-                        break 'pairs;
-                    }
-                }
+                out.extend(targets.into_iter().map(|to| vec![(g, to), (h, to)]));
             }
         }
-    }
-    Ok(kept)
+        out
+    };
+    moves_at_bad_faces(
+        topo, faces, fc, planes, input, pos, min_area, tol, max_trials, pairs,
+    )
 }
 
 /// Whole-region moves at the bad faces left: each region at a bad face's vertices with at most
@@ -328,19 +314,15 @@ pub fn absorb_regions(
     max_faces: usize,
     max_trials: usize,
 ) -> Result<usize, SolveError> {
-    let on_border = border_vertices(topo);
-    let (mut trials, mut kept) = (0, 0);
-    for f0 in bad_faces(pos, faces, fc, planes, min_area) {
-        if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
-            continue;
-        }
+    let wholes = |fc: &[u32], f0: usize| {
         let mut regs: Vec<u32> = faces[f0]
             .iter()
             .flat_map(|&w| regions_at(topo, fc, w))
             .collect();
         regs.sort_unstable();
         regs.dedup();
-        'regions: for r in regs {
+        let mut out = Vec::new();
+        for r in regs {
             let Some(pr) = planes[r as usize] else {
                 continue;
             };
@@ -357,22 +339,17 @@ pub fn absorb_regions(
             targets.sort_unstable_by_key(|&(t, _)| t);
             targets.dedup_by_key(|&mut (t, _)| t);
             targets.sort_by(|a, b| b.1.total_cmp(&a.1));
-            for (t, _) in targets {
-                if trials >= max_trials {
-                    return Ok(kept);
-                }
-                trials += 1;
-                let moves: Vec<(usize, u32)> = members.iter().map(|&h| (h, t)).collect();
-                if try_relabel(
-                    topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
-                )? {
-                    kept += 1;
-                    break 'regions;
-                }
-            }
+            out.extend(
+                targets
+                    .into_iter()
+                    .map(|(t, _)| members.iter().map(|&h| (h, t)).collect()),
+            );
         }
-    }
-    Ok(kept)
+        out
+    };
+    moves_at_bad_faces(
+        topo, faces, fc, planes, input, pos, min_area, tol, max_trials, wholes,
+    )
 }
 
 /// Ring moves at the bad faces left: for each vertex of a bad face and each region there, every
@@ -397,13 +374,9 @@ pub fn ring_moves(
     max_ring: usize,
     max_trials: usize,
 ) -> Result<usize, SolveError> {
-    let on_border = border_vertices(topo);
-    let (mut trials, mut kept) = (0, 0);
-    for f0 in bad_faces(pos, faces, fc, planes, min_area) {
-        if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
-            continue;
-        }
-        'verts: for w in faces[f0] {
+    let rings = |fc: &[u32], f0: usize| {
+        let mut out = Vec::new();
+        for w in faces[f0] {
             for c in regions_at(topo, fc, w) {
                 if planes[c as usize].is_none() {
                     continue;
@@ -415,19 +388,50 @@ pub fn ring_moves(
                     .filter(|&h| fc[h] != c)
                     .map(|h| (h, c))
                     .collect();
-                if moves.is_empty() || moves.len() > max_ring {
-                    continue;
+                if !moves.is_empty() && moves.len() <= max_ring {
+                    out.push(moves);
                 }
-                if trials >= max_trials {
-                    return Ok(kept);
-                }
-                trials += 1;
-                if try_relabel(
-                    topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
-                )? {
-                    kept += 1;
-                    break 'verts;
-                }
+            }
+        }
+        out
+    };
+    moves_at_bad_faces(
+        topo, faces, fc, planes, input, pos, min_area, tol, max_trials, rings,
+    )
+}
+
+/// The loop the move repairs share: for each face bad at the start and still bad, the
+/// candidate move sets `candidates(fc, face)` are tried in order ([`try_relabel`]) until one is
+/// kept; at most `max_trials` sets in all. Returns the sets kept.
+#[allow(clippy::too_many_arguments)]
+fn moves_at_bad_faces(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &mut [u32],
+    planes: &[Option<Plane>],
+    input: &[V3],
+    pos: &mut [V3],
+    min_area: f64,
+    tol: f64,
+    max_trials: usize,
+    candidates: impl Fn(&[u32], usize) -> Vec<Vec<(usize, u32)>>,
+) -> Result<usize, SolveError> {
+    let on_border = border_vertices(topo);
+    let (mut trials, mut kept) = (0, 0);
+    for f0 in bad_faces(pos, faces, fc, planes, min_area) {
+        if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
+            continue;
+        }
+        for moves in candidates(fc, f0) {
+            if trials >= max_trials {
+                return Ok(kept);
+            }
+            trials += 1;
+            if try_relabel(
+                topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
+            )? {
+                kept += 1;
+                break;
             }
         }
     }
