@@ -13,9 +13,9 @@
 //! than K).
 //!
 //! The same relabel-and-repair step (`try_relabel`) also drives two-face moves
-//! ([`pair_moves`]), for the folds a one-face move cannot leave, whole-region moves into one
-//! neighbour ([`absorb_regions`]) and the moves of a vertex's whole ring into one region
-//! ([`ring_moves`]).
+//! ([`Moves::pair_moves`]), for the folds a one-face move cannot leave, whole-region moves
+//! into one neighbour ([`Moves::absorb_regions`]) and the moves of a vertex's whole ring into
+//! one region ([`Moves::ring_moves`]).
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -243,199 +243,211 @@ pub(super) fn neighbourhood(
     (regions, scope)
 }
 
-/// Two-face moves at the bad faces left: for each bad face, every face around its corners
-/// together with one edge neighbour of the same region, into each region edge-adjacent to the
-/// pair. A one-face move can be stuck between two bad states (face f bad in region a, a
-/// neighbour bad when f is in region b); moving f with that neighbour can leave neither.
-/// At most `max_trials` pairs are tried; returns the moves kept.
-#[allow(clippy::too_many_arguments)]
-pub fn pair_moves(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    fc: &mut [u32],
-    planes: &[Option<Plane>],
-    input: &[V3],
-    pos: &mut [V3],
-    min_area: f64,
-    tol: f64,
-    max_trials: usize,
-) -> Result<usize, SolveError> {
-    let edge_neighbors = |f: usize| {
-        topo.face_edges[f].map(|e| {
-            let ef = topo.edge_faces[e as usize];
-            let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
-            (g != NO_FACE).then_some(g as usize)
-        })
-    };
-    let pairs = |fc: &[u32], f0: usize| {
-        let mut out = Vec::new();
-        let cands = faces_around(topo, faces, f0);
-        for &g in &cands {
-            for h in edge_neighbors(g).into_iter().flatten() {
-                if fc[h] != fc[g] || h < g && cands.contains(&h) {
-                    continue; // other region, or this pair comes up from h's side
+/// What the face-move repairs ([`Moves::pair_moves`], [`Moves::absorb_regions`],
+/// [`Moves::ring_moves`]) read besides the regions and positions they change.
+pub struct Moves<'a> {
+    pub topo: &'a Topology,
+    pub faces: &'a [[u32; 3]],
+    pub planes: &'a [Option<Plane>],
+    /// Input positions (chain arc lengths of the repairs).
+    pub input: &'a [V3],
+    /// Faces of at most this area count as degenerate.
+    pub min_area: f64,
+    /// Largest distance of a moved vertex to any of its new planes (absolute).
+    pub tol: f64,
+}
+
+impl Moves<'_> {
+    /// Two-face moves at the bad faces left: for each bad face, every face around its corners
+    /// together with one edge neighbour of the same region, into each region edge-adjacent to the
+    /// pair. A one-face move can be stuck between two bad states (face f bad in region a, a
+    /// neighbour bad when f is in region b); moving f with that neighbour can leave neither.
+    /// At most `max_trials` pairs are tried; returns the moves kept.
+    pub fn pair_moves(
+        &self,
+        fc: &mut [u32],
+        pos: &mut [V3],
+        max_trials: usize,
+    ) -> Result<usize, SolveError> {
+        let Moves {
+            topo,
+            faces,
+            planes,
+            ..
+        } = *self;
+        let edge_neighbors = |f: usize| {
+            topo.face_edges[f].map(|e| {
+                let ef = topo.edge_faces[e as usize];
+                let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
+                (g != NO_FACE).then_some(g as usize)
+            })
+        };
+        let pairs = |fc: &[u32], f0: usize| {
+            let mut out = Vec::new();
+            let cands = faces_around(topo, faces, f0);
+            for &g in &cands {
+                for h in edge_neighbors(g).into_iter().flatten() {
+                    if fc[h] != fc[g] || h < g && cands.contains(&h) {
+                        continue; // other region, or this pair comes up from h's side
+                    }
+                    let mut targets: Vec<u32> = [g, h]
+                        .iter()
+                        .flat_map(|&x| edge_neighbors(x).into_iter().flatten())
+                        .map(|x| fc[x])
+                        .filter(|&c| c != fc[g] && planes[c as usize].is_some())
+                        .collect();
+                    targets.sort_unstable();
+                    targets.dedup();
+                    out.extend(targets.into_iter().map(|to| vec![(g, to), (h, to)]));
                 }
-                let mut targets: Vec<u32> = [g, h]
-                    .iter()
-                    .flat_map(|&x| edge_neighbors(x).into_iter().flatten())
-                    .map(|x| fc[x])
-                    .filter(|&c| c != fc[g] && planes[c as usize].is_some())
-                    .collect();
-                targets.sort_unstable();
-                targets.dedup();
-                out.extend(targets.into_iter().map(|to| vec![(g, to), (h, to)]));
             }
-        }
-        out
-    };
-    moves_at_bad_faces(
-        topo, faces, fc, planes, input, pos, min_area, tol, max_trials, pairs,
-    )
-}
+            out
+        };
+        self.moves_at_bad_faces(fc, pos, max_trials, pairs)
+    }
 
-/// Whole-region moves at the bad faces left: each region at a bad face's vertices with at most
-/// `max_faces` faces goes entirely into one neighbour (closest plane normal first), keeping
-/// every plane. Where [`dissolve_folded_regions`] hands each face to its own closest neighbour,
-/// here the region's outline disappears as a whole, so the vertices that were on its outline
-/// go onto planes they already neighboured; that keeps the chains of one boundary together
-/// (rocker_arm K = 100 seed 1: four regions of 35–172 faces go this way and, with five ring
-/// moves, the run ends without a fold). At most `max_trials` moves are tried; returns those
-/// kept (the regions are left empty: the caller renumbers).
-#[allow(clippy::too_many_arguments)]
-pub fn absorb_regions(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    fc: &mut [u32],
-    planes: &[Option<Plane>],
-    input: &[V3],
-    pos: &mut [V3],
-    min_area: f64,
-    tol: f64,
-    max_faces: usize,
-    max_trials: usize,
-) -> Result<usize, SolveError> {
-    let wholes = |fc: &[u32], f0: usize| {
-        let mut regs: Vec<u32> = faces[f0]
-            .iter()
-            .flat_map(|&w| regions_at(topo, fc, w))
-            .collect();
-        regs.sort_unstable();
-        regs.dedup();
-        let mut out = Vec::new();
-        for r in regs {
-            let Some(pr) = planes[r as usize] else {
-                continue;
-            };
-            let members: Vec<usize> = (0..fc.len()).filter(|&h| fc[h] == r).collect();
-            if members.len() > max_faces {
-                continue;
-            }
-            let mut targets: Vec<(u32, f64)> = members
+    /// Whole-region moves at the bad faces left: each region at a bad face's vertices with at most
+    /// `max_faces` faces goes entirely into one neighbour (closest plane normal first), keeping
+    /// every plane. Where [`dissolve_folded_regions`] hands each face to its own closest neighbour,
+    /// here the region's outline disappears as a whole, so the vertices that were on its outline
+    /// go onto planes they already neighboured; that keeps the chains of one boundary together
+    /// (rocker_arm K = 100 seed 1: four regions of 35–172 faces go this way and, with five ring
+    /// moves, the run ends without a fold). At most `max_trials` moves are tried; returns those
+    /// kept (the regions are left empty: the caller renumbers).
+    pub fn absorb_regions(
+        &self,
+        fc: &mut [u32],
+        pos: &mut [V3],
+        max_faces: usize,
+        max_trials: usize,
+    ) -> Result<usize, SolveError> {
+        let Moves {
+            topo,
+            faces,
+            planes,
+            ..
+        } = *self;
+        let wholes = |fc: &[u32], f0: usize| {
+            let mut regs: Vec<u32> = faces[f0]
                 .iter()
-                .flat_map(|&h| faces[h].iter().flat_map(|&w| regions_at(topo, fc, w)))
-                .filter(|&t| t != r)
-                .filter_map(|t| planes[t as usize].map(|p| (t, dot(p.n, pr.n))))
+                .flat_map(|&w| regions_at(topo, fc, w))
                 .collect();
-            targets.sort_unstable_by_key(|&(t, _)| t);
-            targets.dedup_by_key(|&mut (t, _)| t);
-            targets.sort_by(|a, b| b.1.total_cmp(&a.1));
-            out.extend(
-                targets
-                    .into_iter()
-                    .map(|(t, _)| members.iter().map(|&h| (h, t)).collect()),
-            );
-        }
-        out
-    };
-    moves_at_bad_faces(
-        topo, faces, fc, planes, input, pos, min_area, tol, max_trials, wholes,
-    )
-}
-
-/// Ring moves at the bad faces left: for each vertex of a bad face and each region there, every
-/// face around the vertex goes into that region, which makes the vertex interior to it. Why: a
-/// region whose corner in its plane needs a reflex angle (its two boundary lines leave the
-/// corner on a saddle of planes) cannot cover it with the single face it has there — a
-/// triangle spans less than 180° — and a one- or two-face move at that corner takes the corner
-/// off a plane or puts a neighbour on four; absorbing the ring of the face's vertex on a
-/// boundary line gives the region a second face there with an interior vertex between them.
-/// Rings of more than `max_ring` faces to move are skipped; at most `max_trials` rings are
-/// tried; returns the rings kept.
-#[allow(clippy::too_many_arguments)]
-pub fn ring_moves(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    fc: &mut [u32],
-    planes: &[Option<Plane>],
-    input: &[V3],
-    pos: &mut [V3],
-    min_area: f64,
-    tol: f64,
-    max_ring: usize,
-    max_trials: usize,
-) -> Result<usize, SolveError> {
-    let rings = |fc: &[u32], f0: usize| {
-        let mut out = Vec::new();
-        for w in faces[f0] {
-            for c in regions_at(topo, fc, w) {
-                if planes[c as usize].is_none() {
+            regs.sort_unstable();
+            regs.dedup();
+            let mut out = Vec::new();
+            for r in regs {
+                let Some(pr) = planes[r as usize] else {
+                    continue;
+                };
+                let members: Vec<usize> = (0..fc.len()).filter(|&h| fc[h] == r).collect();
+                if members.len() > max_faces {
                     continue;
                 }
-                let moves: Vec<(usize, u32)> = topo
-                    .vertex_faces(w)
+                let mut targets: Vec<(u32, f64)> = members
                     .iter()
-                    .map(|&h| h as usize)
-                    .filter(|&h| fc[h] != c)
-                    .map(|h| (h, c))
+                    .flat_map(|&h| faces[h].iter().flat_map(|&w| regions_at(topo, fc, w)))
+                    .filter(|&t| t != r)
+                    .filter_map(|t| planes[t as usize].map(|p| (t, dot(p.n, pr.n))))
                     .collect();
-                if !moves.is_empty() && moves.len() <= max_ring {
-                    out.push(moves);
+                targets.sort_unstable_by_key(|&(t, _)| t);
+                targets.dedup_by_key(|&mut (t, _)| t);
+                targets.sort_by(|a, b| b.1.total_cmp(&a.1));
+                out.extend(
+                    targets
+                        .into_iter()
+                        .map(|(t, _)| members.iter().map(|&h| (h, t)).collect()),
+                );
+            }
+            out
+        };
+        self.moves_at_bad_faces(fc, pos, max_trials, wholes)
+    }
+
+    /// Ring moves at the bad faces left: for each vertex of a bad face and each region there, every
+    /// face around the vertex goes into that region, which makes the vertex interior to it. Why: a
+    /// region whose corner in its plane needs a reflex angle (its two boundary lines leave the
+    /// corner on a saddle of planes) cannot cover it with the single face it has there — a
+    /// triangle spans less than 180° — and a one- or two-face move at that corner takes the corner
+    /// off a plane or puts a neighbour on four; absorbing the ring of the face's vertex on a
+    /// boundary line gives the region a second face there with an interior vertex between them.
+    /// Rings of more than `max_ring` faces to move are skipped; at most `max_trials` rings are
+    /// tried; returns the rings kept.
+    pub fn ring_moves(
+        &self,
+        fc: &mut [u32],
+        pos: &mut [V3],
+        max_ring: usize,
+        max_trials: usize,
+    ) -> Result<usize, SolveError> {
+        let Moves {
+            topo,
+            faces,
+            planes,
+            ..
+        } = *self;
+        let rings = |fc: &[u32], f0: usize| {
+            let mut out = Vec::new();
+            for w in faces[f0] {
+                for c in regions_at(topo, fc, w) {
+                    if planes[c as usize].is_none() {
+                        continue;
+                    }
+                    let moves: Vec<(usize, u32)> = topo
+                        .vertex_faces(w)
+                        .iter()
+                        .map(|&h| h as usize)
+                        .filter(|&h| fc[h] != c)
+                        .map(|h| (h, c))
+                        .collect();
+                    if !moves.is_empty() && moves.len() <= max_ring {
+                        out.push(moves);
+                    }
+                }
+            }
+            out
+        };
+        self.moves_at_bad_faces(fc, pos, max_trials, rings)
+    }
+
+    /// The loop the move repairs share: for each face bad at the start and still bad, the
+    /// candidate move sets `candidates(fc, face)` are tried in order ([`try_relabel`]) until one is
+    /// kept; at most `max_trials` sets in all. Returns the sets kept.
+    fn moves_at_bad_faces(
+        &self,
+        fc: &mut [u32],
+        pos: &mut [V3],
+        max_trials: usize,
+        candidates: impl Fn(&[u32], usize) -> Vec<Vec<(usize, u32)>>,
+    ) -> Result<usize, SolveError> {
+        let Moves {
+            topo,
+            faces,
+            planes,
+            input,
+            min_area,
+            tol,
+        } = *self;
+        let on_border = border_vertices(topo);
+        let (mut trials, mut kept) = (0, 0);
+        for f0 in bad_faces(pos, faces, fc, planes, min_area) {
+            if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
+                continue;
+            }
+            for moves in candidates(fc, f0) {
+                if trials >= max_trials {
+                    return Ok(kept);
+                }
+                trials += 1;
+                if try_relabel(
+                    topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
+                )? {
+                    kept += 1;
+                    break;
                 }
             }
         }
-        out
-    };
-    moves_at_bad_faces(
-        topo, faces, fc, planes, input, pos, min_area, tol, max_trials, rings,
-    )
-}
-
-/// The loop the move repairs share: for each face bad at the start and still bad, the
-/// candidate move sets `candidates(fc, face)` are tried in order ([`try_relabel`]) until one is
-/// kept; at most `max_trials` sets in all. Returns the sets kept.
-#[allow(clippy::too_many_arguments)]
-fn moves_at_bad_faces(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    fc: &mut [u32],
-    planes: &[Option<Plane>],
-    input: &[V3],
-    pos: &mut [V3],
-    min_area: f64,
-    tol: f64,
-    max_trials: usize,
-    candidates: impl Fn(&[u32], usize) -> Vec<Vec<(usize, u32)>>,
-) -> Result<usize, SolveError> {
-    let on_border = border_vertices(topo);
-    let (mut trials, mut kept) = (0, 0);
-    for f0 in bad_faces(pos, faces, fc, planes, min_area) {
-        if bad_faces_among(pos, faces, fc, planes, min_area, &[f0]).is_empty() {
-            continue;
-        }
-        for moves in candidates(fc, f0) {
-            if trials >= max_trials {
-                return Ok(kept);
-            }
-            trials += 1;
-            if try_relabel(
-                topo, faces, fc, planes, input, pos, min_area, tol, &on_border, &moves,
-            )? {
-                kept += 1;
-                break;
-            }
-        }
+        Ok(kept)
     }
-    Ok(kept)
 }
 
 /// After a change of regions or planes that put the vertices it touched onto their plane sets:
@@ -617,19 +629,17 @@ mod tests {
         assert!(bad_faces(&pos0, &m.faces, &fc0, &planes, min_area).len() >= 2);
         let run = |max_faces| {
             let (mut fc, mut pos) = (fc0.clone(), pos0.clone());
-            let k = absorb_regions(
-                &topo,
-                &m.faces,
-                &mut fc,
-                &planes,
-                &m.positions,
-                &mut pos,
+            let moves = Moves {
+                topo: &topo,
+                faces: &m.faces,
+                planes: &planes,
+                input: &m.positions,
                 min_area,
-                1e-9,
-                max_faces,
-                8,
-            )
-            .unwrap();
+                tol: 1e-9,
+            };
+            let k = moves
+                .absorb_regions(&mut fc, &mut pos, max_faces, 8)
+                .unwrap();
             (k, fc, pos)
         };
         assert_eq!(run(5), (0, fc0.clone(), pos0.clone()));
@@ -642,18 +652,23 @@ mod tests {
 
     /// A face-move repair on tangled two-page books: never more bad faces, every vertex on its
     /// planes, some moves kept; nothing changes on a clean layout.
-    fn moves_on_tangled_books(
-        name: &str,
-        mv: impl Fn(&Topology, &[[u32; 3]], &mut [u32], &[Option<Plane>], &[V3], &mut [V3]) -> usize,
-    ) {
+    fn moves_on_tangled_books(name: &str, mv: impl Fn(&Moves, &mut [u32], &mut [V3]) -> usize) {
         let (input, faces, fc0, planes) = crate::approx::slide::tests::grid_book(5);
         let mesh = TriMesh {
             positions: input.clone(),
             faces: faces.clone(),
         };
         let topo = Topology::build(&mesh, std::path::Path::new("book")).unwrap();
+        let moves = Moves {
+            topo: &topo,
+            faces: &faces,
+            planes: &planes,
+            input: &input,
+            min_area: 1e-12,
+            tol: 1e-9,
+        };
         let (mut fc, mut pos) = (fc0.clone(), input.clone());
-        let kept = mv(&topo, &faces, &mut fc, &planes, &input, &mut pos);
+        let kept = mv(&moves, &mut fc, &mut pos);
         assert_eq!((kept, &fc, &pos), (0, &fc0, &input), "{name}");
         let border = border_vertices(&topo);
         let mut rnd = crate::approx::slide::tests::uniform(99);
@@ -673,7 +688,7 @@ mod tests {
                 }
             }
             let before = bad_faces(&pos, &faces, &fc, &planes, 1e-12).len();
-            let k = mv(&topo, &faces, &mut fc, &planes, &input, &mut pos);
+            let k = mv(&moves, &mut fc, &mut pos);
             let after = bad_faces(&pos, &faces, &fc, &planes, 1e-12).len();
             moved += k;
             assert!(after <= before, "{name} trial {trial}: {before} -> {after}");
@@ -692,15 +707,11 @@ mod tests {
 
     #[test]
     fn pair_moves_never_add_folds_and_keep_planes() {
-        moves_on_tangled_books("pair", |topo, faces, fc, planes, input, pos| {
-            pair_moves(topo, faces, fc, planes, input, pos, 1e-12, 1e-9, 200).unwrap()
-        });
+        moves_on_tangled_books("pair", |m, fc, pos| m.pair_moves(fc, pos, 200).unwrap());
     }
 
     #[test]
     fn ring_moves_never_add_folds_and_keep_planes() {
-        moves_on_tangled_books("ring", |topo, faces, fc, planes, input, pos| {
-            ring_moves(topo, faces, fc, planes, input, pos, 1e-12, 1e-9, 8, 200).unwrap()
-        });
+        moves_on_tangled_books("ring", |m, fc, pos| m.ring_moves(fc, pos, 8, 200).unwrap());
     }
 }

@@ -130,13 +130,13 @@ pub struct ApproxOptions {
     /// [`nudge`]); 0 = off.
     pub nudge_trials: usize,
     /// Largest number of two-face moves tried per round at the end (see
-    /// [`dissolve::pair_moves`]); 0 = off.
+    /// [`dissolve::Moves::pair_moves`]); 0 = off.
     pub pair_move_trials: usize,
     /// Largest number of whole-region moves into one neighbour tried per round at the end (see
-    /// [`dissolve::absorb_regions`]; regions up to `dissolve_max_faces`); 0 = off.
+    /// [`dissolve::Moves::absorb_regions`]; regions up to `dissolve_max_faces`); 0 = off.
     pub absorb_trials: usize,
     /// Largest number of vertex-ring moves tried per round at the end (see
-    /// [`dissolve::ring_moves`]); 0 = off.
+    /// [`dissolve::Moves::ring_moves`]); 0 = off.
     pub ring_move_trials: usize,
     /// Largest number of regions tried for a split at the end, while fewer than K regions
     /// are used (see [`split`]); 0 = off.
@@ -258,16 +258,16 @@ pub struct ApproxReport {
     pub faces_reassigned: usize,
     /// Faces moved into a neighbouring region after planarity because no vertex placement
     /// removed the fold there (see [`reassign`]), summed over the passes, plus the faces of
-    /// the two-face moves at the end ([`dissolve::pair_moves`]).
+    /// the two-face moves at the end ([`dissolve::Moves::pair_moves`]).
     pub fold_moves: usize,
     /// Neighbourhoods of folds where sliding vertices across region boundaries removed bad
     /// faces (see [`slide`]), on the kept pass.
     pub slides_kept: usize,
     /// Regions dissolved into their neighbours at the end (see [`dissolve`]).
     pub regions_dissolved: usize,
-    /// Regions moved whole into one neighbour at the end (see [`dissolve::absorb_regions`]).
+    /// Regions moved whole into one neighbour at the end (see [`dissolve::Moves::absorb_regions`]).
     pub regions_absorbed: usize,
-    /// Vertex rings moved into one region at the end (see [`dissolve::ring_moves`]).
+    /// Vertex rings moved into one region at the end (see [`dissolve::Moves::ring_moves`]).
     pub rings_moved: usize,
     /// Planes tilted or shifted at the end to move corners apart (see [`nudge`]).
     pub planes_nudged: usize,
@@ -942,16 +942,28 @@ impl EndStage<'_> {
         .len()
     }
 
+    /// The face moves of [`dissolve::Moves`] on `planes` (as the steps before left them).
+    fn moves<'p>(&'p self, planes: &'p [Option<Plane>]) -> dissolve::Moves<'p> {
+        dissolve::Moves {
+            topo: self.topo,
+            faces: &self.mesh.faces,
+            planes,
+            input: &self.mesh.positions,
+            min_area: self.min_area,
+            tol: 1e-8 * self.diag,
+        }
+    }
+
     /// The planes themselves ([`nudge`]), the small regions that still fold ([`dissolve`],
-    /// [`dissolve::absorb_regions`]), two-face moves ([`dissolve::pair_moves`]), vertex-ring
-    /// moves ([`dissolve::ring_moves`]) and, within the unused budget, splits of the
-    /// regions that fold ([`split`]), in turn while they remove folds: a dissolved region
-    /// changes the outlines the planes must meet, a nudged plane the corners a move must reach.
-    /// Each keeps a change only where it leaves fewer bad faces; the smaller changes come first
-    /// (pair moves before whole-region moves: rocker_arm K = 100 seed 1 keeps 2 folds the
-    /// other way round, none this way). Skipped above
-    /// `END_REPAIR_MAX_BAD`: that many folds come from the partition itself (block 24 keeps its
-    /// 70 through 2 000 trials) and each trial costs a local repair.
+    /// [`dissolve::Moves::absorb_regions`]), two-face moves ([`dissolve::Moves::pair_moves`]),
+    /// vertex-ring moves ([`dissolve::Moves::ring_moves`]) and, within the unused budget,
+    /// splits of the regions that fold ([`split`]), in turn while they remove folds: a
+    /// dissolved region changes the outlines the planes must meet, a nudged plane the corners a
+    /// move must reach. Each keeps a change only where it leaves fewer bad faces; the smaller
+    /// changes come first (pair moves before whole-region moves: rocker_arm K = 100 seed 1
+    /// keeps 2 folds the other way round, none this way). Skipped above `END_REPAIR_MAX_BAD`:
+    /// that many folds come from the partition itself (block 24 keeps its 70 through 2 000
+    /// trials) and each trial costs a local repair.
     fn repair(
         &self,
         fc: &mut [u32],
@@ -1010,29 +1022,17 @@ impl EndStage<'_> {
                 out.dissolved += d;
             }
             if opts.pair_move_trials > 0 && self.count_bad(pl, fc) > 0 {
-                let k = dissolve::pair_moves(
-                    topo,
-                    &mesh.faces,
+                let k = self.moves(&pl.planes).pair_moves(
                     fc,
-                    &pl.planes,
-                    &mesh.positions,
                     &mut pl.positions,
-                    min_area,
-                    1e-8 * diag,
                     opts.pair_move_trials,
                 )?;
                 out.faces_moved += 2 * k;
             }
             if opts.dissolve_max_faces > 0 && opts.absorb_trials > 0 && self.count_bad(pl, fc) > 0 {
-                let a = dissolve::absorb_regions(
-                    topo,
-                    &mesh.faces,
+                let a = self.moves(&pl.planes).absorb_regions(
                     fc,
-                    &pl.planes,
-                    &mesh.positions,
                     &mut pl.positions,
-                    min_area,
-                    1e-8 * diag,
                     opts.dissolve_max_faces,
                     opts.absorb_trials,
                 )?;
@@ -1042,15 +1042,9 @@ impl EndStage<'_> {
                 out.absorbed += a;
             }
             if opts.ring_move_trials > 0 && self.count_bad(pl, fc) > 0 {
-                out.rings_moved += dissolve::ring_moves(
-                    topo,
-                    &mesh.faces,
+                out.rings_moved += self.moves(&pl.planes).ring_moves(
                     fc,
-                    &pl.planes,
-                    &mesh.positions,
                     &mut pl.positions,
-                    min_area,
-                    1e-8 * diag,
                     8,
                     opts.ring_move_trials,
                 )?;
