@@ -455,7 +455,7 @@ fn run_once(
         n0: &n0,
         a0: &a0,
         min_area,
-        diag,
+        tol: 1e-8 * diag,
     };
     let mut early = EndRepairs::default();
     // Fold moves (see [`reassign`]), with at most `max_slides` of them repaired by the barrier
@@ -471,7 +471,7 @@ fn run_once(
             min_area,
             &reassign::ReassignOptions {
                 rounds: 8,
-                tol: 1e-8 * diag,
+                tol: end.tol,
                 max_trials: opts.reassign_trials,
                 max_slides,
                 max_slide_faces: 6,
@@ -671,11 +671,7 @@ fn run_once(
     let n_clusters = r.n_clusters.unwrap_or(n_clusters);
     // Face moves (fold, pair and ring moves) can empty a region without renumbering; the
     // count reported and the polygons are of the regions in use.
-    let mut used = vec![false; pl.planes.len().max(n_clusters)];
-    for &c in &face_cluster {
-        used[c as usize] = true;
-    }
-    let n_clusters = if used.iter().filter(|&&u| u).count() < n_clusters {
+    let n_clusters = if regions_in_use(&face_cluster, pl.planes.len()) < n_clusters {
         renumber_with_planes(&mut face_cluster, &mut pl.planes)
     } else {
         n_clusters
@@ -818,6 +814,15 @@ const END_REPAIR_MAX_BAD: usize = 64;
 /// `run_once`).
 const EARLY_END_MAX_BAD: usize = 8;
 
+/// Regions among `0..n` that still have a face: face moves can empty one without renumbering.
+fn regions_in_use(labels: &[u32], n: usize) -> usize {
+    let mut used = vec![false; n];
+    for &c in labels {
+        used[c as usize] = true;
+    }
+    used.iter().filter(|&&u| u).count()
+}
+
 /// Renumbers region labels to 0..count in order of first appearance (drops emptied regions).
 fn renumber(labels: &mut [u32]) -> usize {
     let mut map = std::collections::HashMap::new();
@@ -927,7 +932,8 @@ struct EndStage<'a> {
     n0: &'a [V3],
     a0: &'a [f64],
     min_area: f64,
-    diag: f64,
+    /// Largest distance of a moved vertex to any of its planes: 1e-8 × the bbox diagonal.
+    tol: f64,
 }
 
 impl EndStage<'_> {
@@ -950,7 +956,7 @@ impl EndStage<'_> {
             planes,
             input: &self.mesh.positions,
             min_area: self.min_area,
-            tol: 1e-8 * self.diag,
+            tol: self.tol,
         }
     }
 
@@ -970,8 +976,8 @@ impl EndStage<'_> {
         pl: &mut boundary_l0::Planarized,
         times: &mut StageTimes,
     ) -> Result<EndRepairs, ApproxError> {
-        let (topo, mesh, opts, diag, min_area) =
-            (self.topo, self.mesh, self.opts, self.diag, self.min_area);
+        let (topo, mesh, opts, tol, min_area) =
+            (self.topo, self.mesh, self.opts, self.tol, self.min_area);
         let mut out = EndRepairs::default();
         let mut trials_left = opts.nudge_trials;
         for _ in 0..3 {
@@ -992,7 +998,7 @@ impl EndStage<'_> {
                     &nudge::NudgeOptions {
                         angles: vec![0.005, 0.01, 0.02, 0.04, 0.08, 0.16, 0.3],
                         shifts: vec![0.001, 0.003, 0.01, 0.02, 0.04, 0.08],
-                        tol: 1e-8 * diag,
+                        tol,
                         max_trials: trials_left,
                         rounds: 8,
                         slide_excess: 0,
@@ -1012,7 +1018,7 @@ impl EndStage<'_> {
                     min_area,
                     &dissolve::DissolveOptions {
                         max_faces: opts.dissolve_max_faces,
-                        tol: 1e-8 * diag,
+                        tol,
                         max_trials: 32,
                     },
                 )?;
@@ -1049,12 +1055,7 @@ impl EndStage<'_> {
                     opts.ring_move_trials,
                 )?;
             }
-            // Regions in use (face moves may have emptied some without renumbering).
-            let mut used = vec![false; pl.planes.len()];
-            for &c in fc.iter() {
-                used[c as usize] = true;
-            }
-            let budget = opts.k.saturating_sub(used.iter().filter(|&&u| u).count());
+            let budget = opts.k.saturating_sub(regions_in_use(fc, pl.planes.len()));
             if opts.split_trials > 0 && budget > 0 && self.count_bad(pl, fc) > 0 {
                 let s = split::split_folded_regions(
                     topo,
@@ -1068,7 +1069,7 @@ impl EndStage<'_> {
                     self.a0,
                     &split::SplitOptions {
                         budget,
-                        tol: 1e-8 * diag,
+                        tol,
                         max_trials: opts.split_trials,
                     },
                 )?;
