@@ -3,7 +3,7 @@
 //! BENCHMARKS.md section of `--solver global`).
 //!
 //! `cargo run --release --example global_solve -- MESH.obj [sd|mips] [--pre jacobi|ic0|amg]
-//!  [--cap X|none] [--no-exact] [--cg-proxy T] [--cg-newton T] [--max-iters N] [--lscm] [-q]
+//!  [--cap X|none] [--no-exact] [--proxy-switch R] [--cg-proxy T] [--cg-newton T] [--max-iters N] [--lscm] [-q]
 //!  [--ttq TARGET]`
 //!
 //! `--ttq TARGET` (time to quality) also reruns the (deterministic) solver with an iteration
@@ -11,11 +11,11 @@
 //! most TARGET, and prints that run's iterations and solve time.
 
 use foldfree::init::tutte::TutteWeights;
+use foldfree::init::{initial_map, normalize_area, InitMethod};
 use foldfree::linalg::cg::Preconditioner;
 use foldfree::mesh;
 use foldfree::param::global::{self, GlobalOptions};
 use foldfree::param::Energy;
-use foldfree::pipeline::{initial_map, normalize_area, InitMethod};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -48,6 +48,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 opts.progressive_cap = if v == "none" { None } else { Some(v.parse()?) };
             }
             "--no-exact" => opts.exact_newton = false,
+            "--proxy-switch" => opts.proxy_switch = val()?.parse()?,
             "--cg-proxy" => opts.cg_tol_proxy = val()?.parse()?,
             "--cg-newton" => opts.cg_tol_newton = val()?.parse()?,
             "--max-iters" => opts.max_iters = val()?.parse()?,

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use crate::param::admm::AdmmOptions;
 use crate::param::Energy;
-use crate::pipeline::{run_param, BackendChoice, ParamJob};
+use crate::param::{run_param, BackendChoice, ParamJob};
 use crate::report::ParamReport;
 use crate::Result;
 

@@ -74,9 +74,10 @@ use std::path::Path;
 
 use crate::gpu::interop::{ForeignDispatch, ForeignRange, ForeignSet, SetEntry, TargetUse};
 use crate::gpu::{shaders, vk, Buffer, ComputePipeline, ComputePipelineDesc, Context};
+use crate::init::InitMethod;
 use crate::mesh::{self, TriMesh};
 use crate::param::admm::AdmmOptions;
-use crate::pipeline::{InitMethod, SolverChoice};
+use crate::param::SolverChoice;
 use crate::{Error, Result};
 
 pub use crate::gpu::interop::{ForeignBuffer, ForeignCommandBuffer, HostAccess};
@@ -367,7 +368,7 @@ impl Engine {
         };
         let (_report, topo) = mesh::validate::validate_with_topology(&mesh, file, &opts.validate)?;
         topo.require_disk(file)?;
-        let map = crate::pipeline::compute_map(
+        let map = crate::param::compute_map(
             &mesh,
             &topo,
             opts.init,

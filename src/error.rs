@@ -31,14 +31,20 @@ pub enum Error {
     /// The request itself is wrong (bad option combination, refusing to overwrite the input).
     #[error("{0}")]
     Usage(String),
+    /// A flip-free result was written, but the solver's stop test was not met (iteration cap,
+    /// Ctrl-C); the message says how far from it the run was. Exit code 3.
+    #[error("{0}")]
+    NotConverged(String),
 }
 
 impl Error {
-    /// Process exit code for the CLI: 2 for bad input or usage, 1 for everything else.
+    /// Process exit code for the CLI: 2 for bad input or usage, 3 for a written result that did
+    /// not converge, 1 for everything else.
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Mesh(_) | Error::Usage(_) => 2,
             Error::Gpu(_) | Error::Solve(_) | Error::Io { .. } => 1,
+            Error::NotConverged(_) => 3,
             Error::Approx(e) => e.exit_code(),
             Error::Vol(e) => e.exit_code(),
         }

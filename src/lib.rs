@@ -15,7 +15,6 @@ pub mod linalg;
 pub mod mesh;
 pub mod metrics;
 pub mod param;
-pub mod pipeline;
 pub mod report;
 pub mod viz;
 pub mod vol;

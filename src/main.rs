@@ -1,5 +1,6 @@
 //! `foldfree`: the command-line front end. It parses arguments, calls the library, prints, and
-//! maps errors to exit codes (0 success, 2 bad input or usage, 1 any other failure).
+//! maps errors to exit codes (0 success, 2 bad input or usage, 1 any other failure; `param` also
+//! 3: a flip-free map was written but the stop test was not met).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -8,10 +9,12 @@ use std::sync::Arc;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use foldfree::init::tutte::TutteWeights;
+use foldfree::init::InitMethod;
 use foldfree::mesh;
 use foldfree::param::admm::AdmmOptions;
 use foldfree::param::Energy;
-use foldfree::pipeline::{self, BackendChoice, InitMethod, ParamJob, SolverChoice};
+
+use foldfree::param::{self, BackendChoice, ParamJob, SolverChoice};
 
 #[derive(Parser)]
 #[command(
@@ -398,8 +401,10 @@ struct ParamArgs {
     init: Option<InitArg>,
     #[arg(long, value_enum, default_value = "admm")]
     solver: SolverArg,
-    #[arg(long, value_enum, default_value = "mips")]
-    energy: EnergyArg,
+    /// Distortion energy. Default: mips (conformal) for a disk, sd (isometric) for a mesh cut
+    /// into charts, where a conformal map shrinks limbs and ears and texel density with them.
+    #[arg(long, value_enum)]
+    energy: Option<EnergyArg>,
     #[arg(long, value_enum, default_value = "auto")]
     backend: BackendArg,
     /// Vulkan device: a substring of its name or its index (see `foldfree devices`).
@@ -460,10 +465,6 @@ struct ParamArgs {
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
-    /// When the solver does not converge (iteration cap, Ctrl-C), still write the best
-    /// flip-free map it found. The exit code is 1 either way.
-    #[arg(long)]
-    keep_best: bool,
     /// Cutting into disk charts: `auto` cuts meshes that are not a disk (closed, any genus,
     /// several holes or components), `none` refuses them, `always` also packs a disk.
     #[arg(long, value_enum, default_value = "auto")]
@@ -880,7 +881,7 @@ fn run_bench(
 }
 
 fn run_param(args: ParamArgs) -> foldfree::Result<()> {
-    let energy = energy_of(args.energy);
+    let energy = args.energy.map(energy_of);
     let solver = match args.solver {
         SolverArg::None => SolverChoice::None,
         SolverArg::Admm => SolverChoice::Admm,
@@ -927,7 +928,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
             }
         });
     }
-    let mut admm = AdmmOptions::for_energy(energy);
+    let mut admm = AdmmOptions::for_energy(energy.unwrap_or(Energy::Mips));
     admm.mu_rel = args.mu;
     if let Some(n) = args.max_iters {
         admm.max_iters = n;
@@ -945,9 +946,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     if let Some(t) = args.tol_energy {
         admm.tol_energy = t;
     }
-    if let Some(n) = args.stall_checks {
-        admm.stall_checks = n;
-    }
+    admm.stall_checks = args.stall_checks;
     admm.balance = !args.no_balance;
     if let Some(n) = args.newton_iters {
         admm.newton_iters = n;
@@ -958,9 +957,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     };
     admm.aa_depth = args.aa_depth as usize;
     admm.aa_every = args.aa_every as usize;
-    if let Some(n) = args.aa_start {
-        admm.aa_start = n as usize;
-    }
+    admm.aa_start = args.aa_start.map(|n| n as usize);
     if let Some(t) = args.aa_balance_energy {
         admm.aa_balance_energy = t;
     }
@@ -982,12 +979,12 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     job.validation = args.validation;
     job.profile = args.profile;
     job.admm = admm;
-    job.keep_best = args.keep_best;
+    job.energy = energy;
     job.validate.max_faces = (args.max_faces > 0).then_some(args.max_faces);
     job.cut = match args.cut {
-        CutArg::Auto => pipeline::CutMode::Auto,
-        CutArg::None => pipeline::CutMode::Never,
-        CutArg::Always => pipeline::CutMode::Always,
+        CutArg::Auto => param::CutMode::Auto,
+        CutArg::None => param::CutMode::Never,
+        CutArg::Always => param::CutMode::Always,
     };
     if !(args.margin.is_finite() && (0.0..0.2).contains(&args.margin)) {
         return Err(foldfree::Error::Usage(format!(
@@ -1025,7 +1022,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         );
         b
     };
-    let out = pipeline::run_param(&job, &mut |h| {
+    let out = param::run_param(&job, &mut |h| {
         bar.set_position(h.iteration as u64);
         bar.set_message(format!(
             "μ·F {:.0}  primal {:.1e}  dual {:.1e}  E {:.6}",
@@ -1036,7 +1033,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     let out = out?;
     let r = &out.report;
     if let Some(path) = &args.report {
-        pipeline::write_report(path, r)?;
+        param::write_report(path, r)?;
     }
     let images = foldfree::viz::ImageOutputs {
         layout_svg: args.svg.clone(),
@@ -1055,20 +1052,19 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         r.backend,
         r.device,
         r.init,
-        r.solver,
+        r.solver_path,
         match r.converged {
             Some(true) => format!(", converged in {} iterations", r.iterations),
-            Some(false) if r.written => format!(
-                ", NOT converged after {} iterations (best flip-free map written: --keep-best)",
-                r.iterations
-            ),
             Some(false) => format!(
-                ", NOT converged after {} iterations (nothing written)",
+                ", NOT converged after {} iterations (best flip-free map written)",
                 r.iterations
             ),
             None => String::new(),
         }
     );
+    if r.solver_path == "admm+global" {
+        eprintln!("  {}", r.stop);
+    }
     eprintln!(
         "  flips {}  δcon mean {:.4} (area-weighted {:.4}, max {:.3})  MIPS {:.5}  SD {:.5}  boundary overlaps {}  {:.2} s",
         r.flips,
@@ -1101,20 +1097,10 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         );
     }
     if r.converged == Some(false) {
-        return Err(foldfree::Error::Solve(
-            foldfree::linalg::SolveError::Failed {
-                what: format!(
-                    "{}: the solver did not converge in {} iterations; {}",
-                    r.input,
-                    r.iterations,
-                    if r.written {
-                        "the best flip-free map was written (--keep-best)"
-                    } else {
-                        "nothing was written (--keep-best writes the best flip-free map)"
-                    }
-                ),
-            },
-        ));
+        return Err(foldfree::Error::NotConverged(format!(
+            "{}: the stop test was not met ({}); the best flip-free map was written to {}",
+            r.input, r.stop, r.output
+        )));
     }
     Ok(())
 }

@@ -30,9 +30,22 @@ pub struct ParamReport {
     pub backend: String,
     pub device: String,
     pub init: String,
+    /// The solver asked for: `none`, `admm` or `global`.
     pub solver: String,
+    /// The solvers that ran, in order: `none`, `admm`, `admm+global` (ADMM stopped short and
+    /// handed its best flip-free map to the global solver) or `global`; for an atlas the
+    /// longest path any chart took.
+    pub solver_path: String,
+    /// Why the run stopped and, when it did not converge, how far from the stop test it was
+    /// (the largest chart for an atlas).
+    pub stop: String,
     pub energy: Option<String>,
+    /// `iterations_admm + iterations_global`.
     pub iterations: usize,
+    pub iterations_admm: usize,
+    pub iterations_global: usize,
+    /// Whether the stop test of the last solver was met (every chart's, for an atlas). A map
+    /// that did not converge is still written (exit code 3).
     pub converged: Option<bool>,
     pub mu_rel: Option<f64>,
     pub init_flips: usize,
@@ -41,14 +54,14 @@ pub struct ParamReport {
     /// Bytes the kernels read and write per iteration (Vulkan only), for bandwidth estimates.
     pub bytes_per_iteration: Option<u64>,
     pub history: Vec<crate::param::admm::History>,
-    /// Whether the output OBJ was written: always when the solver converged (or none ran),
-    /// otherwise only with `--keep-best`.
+    /// Whether the output OBJ was written: always when a report is produced — every run that
+    /// has a flip-free map writes it.
     pub written: bool,
     /// Seams, charts and packing, when the mesh was cut into charts.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub atlas: Option<AtlasReport>,
-    /// The global solver's stop reason, per-phase totals and per-iteration history
-    /// (`--solver global` only).
+    /// The global solver's stop reason, per-phase totals and per-iteration history (when it
+    /// ran: `--solver global`, or after ADMM's hand-off).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub global: Option<crate::param::global::GlobalResult>,
 }

@@ -6,11 +6,11 @@ use std::path::Path;
 use std::process::Command;
 
 use foldfree::init::tutte::TutteWeights;
+use foldfree::init::{initial_map, normalize_area, InitMethod};
 use foldfree::mesh::{self, Topology, TriMesh};
 use foldfree::param::admm::driver::{map_energy, Executor};
 use foldfree::param::admm::{self, cpu::CpuExecutor, Accel, AdmmOptions, AdmmProblem, AdmmState};
 use foldfree::param::Energy;
-use foldfree::pipeline::{initial_map, normalize_area, InitMethod};
 
 fn data(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -94,7 +94,7 @@ fn anderson_under_an_unstable_penalty_still_returns_a_flip_free_map() {
         o.adaptive_mu = false;
         o.max_iters = 150;
         o.accel = Accel::Anderson;
-        o.aa_start = 0;
+        o.aa_start = Some(0);
         let mut exec = CpuExecutor::new(&p, energy, 1).with_accel(o.accel, o.aa_depth, o.aa_every);
         let r = admm::solve(
             &p,
@@ -131,7 +131,7 @@ fn anderson_starts_after_the_plain_iterations_asked_for() {
         let mut o = AdmmOptions::for_energy(energy);
         o.max_iters = max_iters;
         o.accel = Accel::Anderson;
-        o.aa_start = start_at;
+        o.aa_start = Some(start_at);
         let mut exec = CpuExecutor::new(&p, energy, 1).with_accel(o.accel, o.aa_depth, o.aa_every);
         let r = admm::solve(&p, &m.faces, &lscm, None, &o, &mut exec, &mut |_| {}).expect("solve");
         let last = r.history.last().expect("at least one check");

@@ -6,10 +6,10 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use foldfree::init::tutte::TutteWeights;
+use foldfree::init::{initial_map, normalize_area, InitMethod};
 use foldfree::mesh::{self, Topology, TriMesh};
 use foldfree::param::admm::{self, cpu::CpuExecutor, driver::map_energy, AdmmOptions, AdmmProblem};
 use foldfree::param::Energy;
-use foldfree::pipeline::{initial_map, normalize_area, InitMethod};
 
 fn load(name: &str) -> (TriMesh, Topology, AdmmProblem) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -4,11 +4,11 @@
 
 use std::path::Path;
 
+use foldfree::init::{initial_map, normalize_area, InitMethod};
 use foldfree::mesh;
 use foldfree::param::admm::driver::{Executor, Residuals};
 use foldfree::param::admm::{self, AdmmOptions, AdmmProblem, AdmmState};
 use foldfree::param::Energy;
-use foldfree::pipeline::{initial_map, normalize_area, InitMethod};
 
 /// Reports `script(check index, μ·F)` = (relative primal, relative dual, energy) at every check
 /// and keeps the uploaded state (the flip-free start map) for the driver's recoveries.
@@ -153,18 +153,64 @@ fn balancing_halves_mu_to_its_bound_when_the_consensus_is_tight() {
     let (_, mu_seen) = run(&opts, |k, _| (1e-6, 1e-3, 1.0 + 1e-2 * (k as f64).sin()));
     let last = *mu_seen.last().expect("ran");
     assert!(
-        (last - 100.0 / opts.mu_shrink_max).abs() < 1e-9,
+        (last - 100.0 / opts.mu_shrink_max()).abs() < 1e-9,
         "ended at {last}"
     );
     // Halvings are at least stall_checks checks apart.
     let changes: Vec<usize> = (1..mu_seen.len())
         .filter(|&i| mu_seen[i] != mu_seen[i - 1])
         .collect();
-    assert_eq!(changes.len() as f64, opts.mu_shrink_max.log2().round());
-    assert!(changes.windows(2).all(|w| w[1] - w[0] > opts.stall_checks));
+    assert_eq!(changes.len() as f64, opts.mu_shrink_max().log2().round());
+    assert!(changes
+        .windows(2)
+        .all(|w| w[1] - w[0] > opts.stall_checks()));
 
     // A consensus at 0.3 × tolerance is not tight enough (the f32 floor of the residual on a
     // device is close to that): μ stays.
     let (_, mu_seen) = run(&opts, |k, _| (3e-5, 1e-3, 1.0 + 1e-2 * (k as f64).sin()));
     assert!(mu_seen.iter().all(|&m| m == 100.0));
+}
+
+/// A consensus that stalls just above tolerance (the primal residual never makes a new low):
+/// μ is raised to its cap, and once it is there and the window passes without progress the run
+/// stops as stalled — long before the iteration cap — instead of repeating the cycle.
+#[test]
+fn a_stall_at_the_mu_cap_stops_the_run_as_stalled() {
+    let mut opts = AdmmOptions::for_energy(Energy::Mips);
+    opts.mu_rel = Some(100.0);
+    opts.max_iters = 400 * opts.check_every;
+    let (r, mu_seen) = run(&opts, |k, _| {
+        (1.3e-4, 1.3e-4, 2.0 + 1e-4 * (k as f64).sin())
+    });
+    assert_eq!(r.stop, admm::AdmmStop::Stalled);
+    assert!(!r.converged && !r.interrupted);
+    let cap = 100.0 * opts.mu_growth_max;
+    assert_eq!(*mu_seen.last().expect("ran"), cap);
+    // One window per doubling up to the cap, then one more at the cap: nothing else.
+    let doublings = opts.mu_growth_max.log2().round() as usize;
+    let checks = (doublings + 1) * opts.stall_checks() + 1;
+    assert!(
+        r.iterations <= checks * opts.check_every,
+        "{} iterations, expected at most {}",
+        r.iterations,
+        checks * opts.check_every
+    );
+    // The best map is flip-free (the start map at worst) and the stall says how far it was.
+    assert_eq!(r.flips, 0);
+    assert!(r.stop_summary().contains("stalled"), "{}", r.stop_summary());
+
+    // With μ fixed there is nothing to adapt: the first window without progress is a stall.
+    opts.adaptive_mu = false;
+    let (r, mu_seen) = run(&opts, |_, _| (1.3e-4, 1.3e-4, 2.0));
+    assert_eq!(r.stop, admm::AdmmStop::Stalled);
+    assert!(mu_seen.iter().all(|&m| m == 100.0));
+    assert!(r.iterations <= (opts.stall_checks() + 1) * opts.check_every);
+
+    // A primal residual that keeps making new lows is progress, not a stall, even at the cap.
+    opts.adaptive_mu = true;
+    opts.max_iters = 60 * opts.check_every;
+    let (r, _) = run(&opts, |k, _| {
+        (1e-2 * 0.9f64.powi(k as i32) + 1e-4, 1e-3, 2.0)
+    });
+    assert_eq!(r.stop, admm::AdmmStop::MaxIterations);
 }

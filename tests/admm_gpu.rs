@@ -29,6 +29,7 @@ use foldfree::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, Context, DescriptorSet, Recorder,
 };
 use foldfree::init::{count_flips, TutteWeights};
+use foldfree::init::{initial_map, normalize_area, InitMethod};
 use foldfree::mesh::{self, TriMesh};
 use foldfree::param::admm::driver::{map_energy, Executor, Residuals};
 use foldfree::param::admm::layout::{FacePush, MuCountPush, ResidualPush};
@@ -37,7 +38,6 @@ use foldfree::param::admm::{
     self, cpu, kernels, AdmmOptions, AdmmProblem, AdmmResult, AdmmState, NO_SLOT,
 };
 use foldfree::param::energy::{self, Energy};
-use foldfree::pipeline::{initial_map, normalize_area, InitMethod};
 use gpu_common::with_test_context;
 
 /// [`with_test_context`], also asserting that the validation layer really is on (and
@@ -115,7 +115,7 @@ struct Fixture {
     name: &'static str,
     mesh: TriMesh,
     problem: AdmmProblem,
-    /// The LSCM start, area-normalised as `pipeline::run_param` does (disk meshes only).
+    /// The LSCM start, area-normalised as `param::run_param` does (disk meshes only).
     lscm: Vec<[f64; 2]>,
     /// Tutte start when LSCM flips (the pipeline's fallback).
     fallback: Option<Vec<[f64; 2]>>,

@@ -125,12 +125,11 @@ fn check_atlas(input: &Path, dir: &TempDir, extra: &[&str], expect_charts: Optio
         out.to_str().expect("utf-8 path"),
         "--report",
         rep.to_str().expect("utf-8 path"),
-        "--keep-best",
         "-q",
     ];
     args.extend_from_slice(extra);
     let (code, stderr) = foldfree(&args);
-    let kept = code == Some(1) && stderr.contains("best flip-free map was written");
+    let kept = code == Some(3) && stderr.contains("best flip-free map was written");
     assert!(code == Some(0) || kept, "{stderr}");
 
     let src = objcheck::parse_obj(&fs::read_to_string(input).expect("read input")).expect("input");

@@ -14,6 +14,7 @@ pub use tutte::{tutte, tutte_report, TutteWeights};
 
 use crate::linalg::cg::{CgOptions, Preconditioner};
 use crate::linalg::SolveError;
+use crate::mesh::{Topology, TriMesh};
 
 /// A starting map with what it cost and how valid it is.
 #[derive(Clone, Debug, PartialEq)]
@@ -214,5 +215,59 @@ pub mod vec3 {
     #[inline]
     pub fn norm(a: [f64; 3]) -> f64 {
         dot(a, a).sqrt()
+    }
+}
+
+/// Which start map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InitMethod {
+    /// Tutte embedding (uniform or mean-value weights): flip-free, high distortion.
+    Tutte(TutteWeights),
+    /// Least-squares conformal map: near-optimal for MIPS, may flip a few faces (ADMM repairs).
+    Lscm,
+}
+
+/// The start map of a disk mesh.
+pub fn initial_map(
+    mesh: &TriMesh,
+    topo: &Topology,
+    init: InitMethod,
+) -> crate::Result<Vec<[f64; 2]>> {
+    let boundary = topo
+        .boundary_loops
+        .first()
+        .ok_or_else(|| crate::Error::Usage("the mesh has no boundary loop".into()))?;
+    let uv = match init {
+        InitMethod::Tutte(w) => tutte(&mesh.positions, &mesh.faces, boundary, w)?,
+        InitMethod::Lscm => lscm::lscm(&mesh.positions, &mesh.faces, boundary)?,
+    };
+    Ok(uv)
+}
+
+/// Scales `uv` about its centroid so its total |area| equals the 3D area: Jacobians are then
+/// O(1), which keeps the device's f32 arithmetic well inside its range.
+pub fn normalize_area(mesh: &TriMesh, uv: &mut [[f64; 2]], area_3d: f64) {
+    let a = total_signed_area(&mesh.faces, uv).abs();
+    if !(a > 0.0 && a.is_finite() && area_3d > 0.0) {
+        return;
+    }
+    let s = (area_3d / a).sqrt();
+    let n = uv.len().max(1) as f64;
+    let c = uv
+        .iter()
+        .fold([0.0, 0.0], |acc, p| [acc[0] + p[0] / n, acc[1] + p[1] / n]);
+    for p in uv.iter_mut() {
+        *p = [(p[0] - c[0]) * s, (p[1] - c[1]) * s];
+    }
+}
+
+impl InitMethod {
+    /// The name the CLI and the report use.
+    pub fn name(self) -> &'static str {
+        match self {
+            InitMethod::Tutte(TutteWeights::Uniform) => "tutte",
+            InitMethod::Tutte(TutteWeights::MeanValue) => "tutte_mean_value",
+            InitMethod::Lscm => "lscm",
+        }
     }
 }

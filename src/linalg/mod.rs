@@ -6,6 +6,28 @@
 pub mod cg;
 pub mod small;
 
+use rayon::prelude::*;
+
+/// Items per chunk of [`ordered_sum`].
+pub const SUM_CHUNK: usize = 4096;
+
+/// `Σ_{i<n} f(i)` in parallel, with the same bits whatever the thread count: fixed chunks of
+/// [`SUM_CHUNK`] items, each summed in order, then the chunk sums in order. (rayon's own `sum`
+/// splits the work by how many threads steal it, and floating-point addition is not
+/// associative, so its result depends on the machine — and a solver's path with it.)
+pub fn ordered_sum(n: usize, f: impl Fn(usize) -> f64 + Sync) -> f64 {
+    (0..n.div_ceil(SUM_CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            (c * SUM_CHUNK..((c + 1) * SUM_CHUNK).min(n))
+                .map(&f)
+                .sum::<f64>()
+        })
+        .collect::<Vec<_>>()
+        .iter()
+        .sum()
+}
+
 /// A numerical solve that did not produce a usable answer.
 #[derive(Debug, thiserror::Error)]
 pub enum SolveError {

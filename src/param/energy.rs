@@ -16,6 +16,14 @@ pub enum Energy {
 }
 
 impl Energy {
+    /// The name the CLI and the report use: `mips` or `sd`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Energy::Mips => "mips",
+            Energy::SymmetricDirichlet => "sd",
+        }
+    }
+
     /// Value of the energy at its global minimum (a rotation): MIPS 2, SD 4.
     pub fn minimum(self) -> f64 {
         match self {

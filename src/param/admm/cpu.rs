@@ -462,8 +462,8 @@ impl Executor for CpuExecutor<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::init::{initial_map, normalize_area, InitMethod};
     use crate::mesh;
-    use crate::pipeline::{initial_map, normalize_area, InitMethod};
 
     /// After one iteration the edge state is consistent (`Y` in the consensus set, `Λ` in its
     /// complement), so the reduced state `w` determines it exactly: unpacking a packed state

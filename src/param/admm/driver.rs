@@ -92,12 +92,15 @@ pub struct AdmmOptions {
     /// Raise μ (×2) when the primal residual stalls above tolerance (oscillation that
     /// precedes divergence).
     pub adaptive_mu: bool,
-    /// Checks without a new low (< 0.95× the best) of the primal residual before μ is raised.
-    pub stall_checks: usize,
+    /// Checks without a new low (< 0.95× the best) of the primal residual before μ is raised
+    /// (and, with μ at its cap, before the run counts as stalled); `None`: the energy's
+    /// default ([`AdmmOptions::stall_checks`]).
+    pub stall_checks: Option<usize>,
     /// Bound of the μ raises: μ stays at or below initial μ × this factor.
     pub mu_growth_max: f64,
-    /// Bound of residual balancing: μ stays at or above initial μ ÷ this factor.
-    pub mu_shrink_max: f64,
+    /// Bound of residual balancing: μ stays at or above initial μ ÷ this factor; `None`: the
+    /// energy's default ([`AdmmOptions::mu_shrink_max`]).
+    pub mu_shrink_max: Option<f64>,
     /// Halve μ when the consensus is tight (primal residual under `balance_primal ×
     /// tol_primal`) but the maps still move (dual residual or energy change over tolerance), at
     /// most once per `stall_checks` checks and never below a μ that had to be raised on a stall.
@@ -115,8 +118,9 @@ pub struct AdmmOptions {
     pub aa_every: usize,
     /// Plain iterations before acceleration starts: runs that converge within them (MIPS from
     /// LSCM: 75–275 iterations) pay nothing for it, and the history then starts near the
-    /// slowly converging regime it is meant for.
-    pub aa_start: usize,
+    /// slowly converging regime it is meant for. `None`: the energy's default
+    /// ([`AdmmOptions::aa_start`]).
+    pub aa_start: Option<usize>,
     /// While accelerating, residual balancing (lowering μ) also waits for the relative energy
     /// change between checks to fall under this (∞: no extra condition).
     pub aa_balance_energy: f64,
@@ -143,43 +147,59 @@ impl AdmmOptions {
             energy_checks: 2,
             resync_every: 0,
             adaptive_mu: true,
-            // SD from LSCM has a long transient (the energy swings by 1e-2 between checks for
-            // the first ~1500 iterations) in which the primal residual makes no new low for a
-            // while without being unstable; raising μ there (8 checks) pinned lion_mask SD at
-            // μ·F 8000, in a slow limit cycle it never left (10 000 iterations, not converged).
-            // With 16 it stays at 1000 and converges (2075 iterations, BENCHMARKS.md). MIPS
-            // keeps 8: 16 cost camelhead MIPS its convergence.
-            stall_checks: match energy {
-                Energy::Mips => 8,
-                Energy::SymmetricDirichlet => 16,
-            },
+            stall_checks: None,
             mu_growth_max: 64.0,
-            // On the f32 device the primal residual has a floor that grows as μ shrinks (the
-            // multipliers grow as 1/μ and `A − Λ/μ` cancels): ≈ 2.5e-5 at μ·F 6.25 on
-            // camel_open MIPS, the balancing threshold. Below that the device stopped balancing
-            // and the CPU went on to 1.56, 3075 against 5075 iterations; bounded at 100/16 both
-            // take 3050–3075. SD balances down to 1000/64 on camel on both backends alike.
-            mu_shrink_max: match energy {
-                Energy::Mips => 16.0,
-                Energy::SymmetricDirichlet => 64.0,
-            },
+            mu_shrink_max: None,
             balance: true,
             balance_primal: 0.25,
             stop: None,
             accel: Accel::None,
             aa_depth: 6,
             aa_every: 1,
-            // Plain ADMM from LSCM converges in 75–275 iterations on most MIPS runs; on SD
-            // runs starting late cost lion_mask 3225 instead of 1475 (BENCHMARKS.md).
-            aa_start: match energy {
-                Energy::Mips => 100,
-                Energy::SymmetricDirichlet => 0,
-            },
+            aa_start: None,
             // Off: the gate helps camelhead SD (5400 → 3150 iterations) but costs camel,
             // lion and face SD more (BENCHMARKS.md, Anderson round 2).
             aa_balance_energy: f64::INFINITY,
             recovery: Recovery::LeastSquares,
         }
+    }
+
+    /// Checks without a new primal low before μ is raised (the option, or the energy's default).
+    ///
+    /// SD from LSCM has a long transient (the energy swings by 1e-2 between checks for the
+    /// first ~1500 iterations) in which the primal residual makes no new low for a while without
+    /// being unstable; raising μ there (8 checks) pinned lion_mask SD at μ·F 8000, in a slow
+    /// limit cycle it never left. With 16 it stays at 1000 and converges (2075 iterations,
+    /// BENCHMARKS.md). MIPS keeps 8: 16 cost camelhead MIPS its convergence.
+    pub fn stall_checks(&self) -> usize {
+        self.stall_checks.unwrap_or(match self.energy {
+            Energy::Mips => 8,
+            Energy::SymmetricDirichlet => 16,
+        })
+    }
+
+    /// Bound of residual balancing (the option, or the energy's default).
+    ///
+    /// On the f32 device the primal residual has a floor that grows as μ shrinks (the
+    /// multipliers grow as 1/μ and `A − Λ/μ` cancels): ≈ 2.5e-5 at μ·F 6.25 on camel_open MIPS,
+    /// the balancing threshold. Below that the device stopped balancing and the CPU went on to
+    /// 1.56, 3075 against 5075 iterations; bounded at 100/16 both take 3050–3075. SD balances
+    /// down to 1000/64 on camel on both backends alike.
+    pub fn mu_shrink_max(&self) -> f64 {
+        self.mu_shrink_max.unwrap_or(match self.energy {
+            Energy::Mips => 16.0,
+            Energy::SymmetricDirichlet => 64.0,
+        })
+    }
+
+    /// Plain iterations before Anderson acceleration starts (the option, or the energy's
+    /// default): plain ADMM from LSCM converges in 75–275 iterations on most MIPS runs; on SD
+    /// runs starting late cost lion_mask 3225 instead of 1475 (BENCHMARKS.md).
+    pub fn aa_start(&self) -> usize {
+        self.aa_start.unwrap_or(match self.energy {
+            Energy::Mips => 100,
+            Energy::SymmetricDirichlet => 0,
+        })
     }
 
     /// The penalty actually used at the start, as `μ · #faces`.
@@ -218,22 +238,63 @@ pub struct History {
     pub accel_rejected: Option<usize>,
 }
 
+/// Why [`solve`] returned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AdmmStop {
+    /// Residuals and energy change under tolerance, and the recovered map flip-free.
+    Converged,
+    /// μ at its cap (or fixed) and no progress: the primal residual made no new low for
+    /// `stall_checks` checks, or the residuals are small but the recovered map still flips.
+    /// Raising μ is the only remedy the iteration has for either; without it, more iterations
+    /// repeat the same cycle.
+    Stalled,
+    /// The iteration cap.
+    MaxIterations,
+    /// Stopped by the caller's flag.
+    Interrupted,
+}
+
 /// What [`solve`] returns.
 #[derive(Clone, Debug)]
 pub struct AdmmResult {
-    /// #V per-vertex UVs (the best flip-free recovered map; the start map if none was).
+    /// #V per-vertex UVs (the best flip-free map seen; the start map if none was better).
     pub uv: Vec<[f64; 2]>,
     pub iterations: usize,
     /// Residuals and energy change under tolerance, and the recovered map flip-free.
     pub converged: bool,
     /// Stopped by the caller's flag.
     pub interrupted: bool,
+    pub stop: AdmmStop,
     pub mu_rel_final: f64,
     pub history: Vec<History>,
     /// Flips of the map in `uv` (0 unless even the start map was flipped).
     pub flips: usize,
+    /// Σ w E of the map in `uv` (+∞ when it flips).
+    pub energy: f64,
     pub backend: &'static str,
     pub device: String,
+    /// The tolerances the stop test used (for [`AdmmResult::stop_summary`]).
+    pub tol_primal: f64,
+    pub tol_dual: f64,
+}
+
+impl AdmmResult {
+    /// Why ADMM stopped, with its last residuals against their tolerances.
+    pub fn stop_summary(&self) -> String {
+        let last = self.history.last();
+        let (p, d) = last.map_or((f64::NAN, f64::NAN), |h| (h.primal, h.dual));
+        let why = match self.stop {
+            AdmmStop::Converged => "converged",
+            AdmmStop::Stalled => "stalled (μ at its cap, no progress)",
+            AdmmStop::MaxIterations => "iteration cap",
+            AdmmStop::Interrupted => "interrupted",
+        };
+        format!(
+            "admm {why} after {} iterations (primal {p:.2e} / tol {:.0e}, dual {d:.2e} / tol {:.0e}, μ·F {})",
+            self.iterations, self.tol_primal, self.tol_dual, self.mu_rel_final
+        )
+    }
 }
 
 /// Σ_f w_f E(J_f(uv)) and the number of faces with `det J ≤ 0`.
@@ -257,12 +318,73 @@ pub fn map_energy(
     (sum, flips)
 }
 
-/// Runs ADMM from the per-vertex start map `init_uv` (#V) until convergence or `max_iters`.
+/// The best flip-free per-vertex map seen so far.
+struct Best {
+    uv: Vec<[f64; 2]>,
+    energy: f64,
+    flips: usize,
+}
+
+impl Best {
+    /// Keeps `uv` when it is flip-free and no worse. When it flips, the part of the way from
+    /// the best map towards it that flips nothing is taken instead if it lowers the energy:
+    /// along `best + t (uv − best)` every face's Jacobian is affine in `t`, so the largest
+    /// flip-free `t` is exact ([`energy::max_flip_free_step`]); a fraction of it keeps every
+    /// face strictly positive, and halving looks for a decrease. A recovered map that flips a
+    /// few faces is still mostly closer to the optimum than the start map.
+    fn offer(&mut self, problem: &AdmmProblem, faces: &[[u32; 3]], uv: &[[f64; 2]], e: Energy) {
+        let (energy, flips) = map_energy(problem, faces, uv, e);
+        if flips == 0 && energy <= self.energy {
+            self.uv = uv.to_vec();
+            self.energy = energy;
+            self.flips = 0;
+            return;
+        }
+        if self.flips > 0 || flips == 0 {
+            return;
+        }
+        let d: Vec<[f64; 2]> = uv
+            .iter()
+            .zip(&self.uv)
+            .map(|(a, b)| [a[0] - b[0], a[1] - b[1]])
+            .collect();
+        let t_max = (0..faces.len())
+            .map(|f| {
+                energy::max_flip_free_step(
+                    &problem.jacobian(faces, &self.uv, f),
+                    &problem.jacobian(faces, &d, f),
+                )
+            })
+            .fold(f64::INFINITY, f64::min);
+        let mut t = (0.85 * t_max).min(1.0);
+        for _ in 0..12 {
+            if t.is_nan() || t <= 0.0 {
+                break;
+            }
+            let trial: Vec<[f64; 2]> = self
+                .uv
+                .iter()
+                .zip(&d)
+                .map(|(b, d)| [b[0] + t * d[0], b[1] + t * d[1]])
+                .collect();
+            let (te, tf) = map_energy(problem, faces, &trial, e);
+            if tf == 0 && te < self.energy {
+                self.uv = trial;
+                self.energy = te;
+                return;
+            }
+            t *= 0.5;
+        }
+    }
+}
+
+/// Runs ADMM from the per-vertex start map `init_uv` (#V) until convergence, a stall, or
+/// `max_iters`.
 ///
 /// `fallback` is a flip-free map (e.g. Tutte) returned if neither the start map nor any
-/// recovered map is flip-free. `progress` is called at every check. Never returns a flipped map silently: the result's
-/// `flips` counts them (non-zero only when the start map was already flipped and no recovered
-/// map ever was flip-free).
+/// recovered map is flip-free. `progress` is called at every check. Never returns a flipped map
+/// silently: the result's `flips` counts them (non-zero only when the start map was already
+/// flipped and no recovered map ever was flip-free).
 pub fn solve(
     problem: &AdmmProblem,
     faces: &[[u32; 3]],
@@ -289,26 +411,33 @@ pub fn solve(
     let state = AdmmState::from_uv(problem, faces, init_uv);
     exec.upload(&state)?;
     let accelerating = opts.accel != Accel::None;
-    exec.set_accel_active(accelerating && opts.aa_start == 0);
+    exec.set_accel_active(accelerating && opts.aa_start() == 0);
 
     let (e0, flips0) = map_energy(problem, faces, init_uv, opts.energy);
-    let mut best_uv = init_uv.to_vec();
-    let mut best = if flips0 == 0 { e0 } else { f64::INFINITY };
-    let mut best_flips = flips0;
+    let mut best = Best {
+        uv: init_uv.to_vec(),
+        energy: if flips0 == 0 { e0 } else { f64::INFINITY },
+        flips: flips0,
+    };
     if let Some(fb) = fallback {
         let (e, flips) = map_energy(problem, faces, fb, opts.energy);
-        if flips == 0 && e < best {
-            best = e;
-            best_uv = fb.to_vec();
-            best_flips = 0;
+        if flips == 0 && e < best.energy {
+            best = Best {
+                uv: fb.to_vec(),
+                energy: e,
+                flips: 0,
+            };
+            // The folded start map is still the better guess almost everywhere: the flip-free
+            // part of the way towards it.
+            best.offer(problem, faces, init_uv, opts.energy);
         }
     }
     let mut uv = init_uv.to_vec();
+    let mu_cap = opts.initial_mu_rel() * opts.mu_growth_max;
 
     let mut history: Vec<History> = Vec::new();
     let mut it = 0usize;
-    let mut converged = false;
-    let mut interrupted = false;
+    let mut stop = AdmmStop::MaxIterations;
     let mut prev_energy = f64::NAN;
     // Stall detection: the best primal residual since the last change of μ, and how many
     // checks ago it was set.
@@ -326,12 +455,12 @@ pub fn solve(
             .as_ref()
             .is_some_and(|s| s.load(Ordering::Relaxed))
         {
-            interrupted = true;
+            stop = AdmmStop::Interrupted;
             break;
         }
         let batch = opts.check_every.max(1).min(opts.max_iters - it);
         let mu = mu_rel / nf;
-        if accelerating && it >= opts.aa_start {
+        if accelerating && it >= opts.aa_start() {
             exec.set_accel_active(true);
         }
         let r = exec.iterate(batch, mu)?;
@@ -366,32 +495,38 @@ pub fn solve(
         } else {
             calm_checks = 0;
         }
+        // μ can still be raised: the only remedy of the iteration for a stalled consensus.
+        let can_raise = opts.adaptive_mu && mu_rel * 2.0 <= mu_cap;
+        if primal < 0.95 * best_primal {
+            best_primal = primal;
+            checks_since_best = 0;
+        } else {
+            checks_since_best += 1;
+        }
         let small = primal < opts.tol_primal
             && dual < opts.tol_dual
             && calm_checks >= opts.energy_checks.max(1);
+        // No new primal low for a window, above tolerance, and nothing left to adapt.
+        let mut stalled =
+            primal > opts.tol_primal && checks_since_best >= opts.stall_checks() && !can_raise;
         let resync_due = opts.resync_every > 0 && since_resync >= opts.resync_every;
         let last = it >= opts.max_iters;
-        if small || resync_due || last {
+        let mut converged = false;
+        if small || resync_due || last || stalled {
             let st = exec.download()?;
             recover(&st.a, &mut uv)?;
             let (e, flips) = map_energy(problem, faces, &uv, opts.energy);
             h.recovered_flips = Some(flips);
             h.recovered_energy = Some(e);
-            if flips == 0 && e <= best {
-                best = e;
-                best_uv.clone_from(&uv);
-                best_flips = 0;
-            }
+            best.offer(problem, faces, &uv, opts.energy);
             if small && flips == 0 {
                 converged = true;
-            } else if small
-                && flips > 0
-                && opts.adaptive_mu
-                && mu_rel * 2.0 <= opts.initial_mu_rel() * opts.mu_growth_max
-            {
+            } else if small && flips > 0 && can_raise {
                 // Residuals are small but the consensus is not yet tight enough for a flip-free
                 // recovery: tighten it.
                 mu_rel *= 2.0;
+            } else if small && flips > 0 {
+                stalled = true;
             }
             if resync_due && flips == 0 {
                 let mut synced = AdmmState::from_uv(problem, faces, &uv);
@@ -402,21 +537,20 @@ pub fn solve(
                 since_resync = 0;
             }
         }
-        if primal < 0.95 * best_primal {
-            best_primal = primal;
-            checks_since_best = 0;
-        } else {
-            checks_since_best += 1;
+        if converged || stalled {
+            stop = if converged {
+                AdmmStop::Converged
+            } else {
+                AdmmStop::Stalled
+            };
+            progress(&h);
+            history.push(h);
+            break;
         }
         // Below the stability threshold of μ the iteration oscillates (primal ≈ dual, no
         // progress) and then diverges; above it, it converges monotonically. So: raise μ when
         // the primal residual is above tolerance and has made no new low for a while.
-        if opts.adaptive_mu
-            && !converged
-            && primal > opts.tol_primal
-            && checks_since_best >= opts.stall_checks
-            && mu_rel * 2.0 <= opts.initial_mu_rel() * opts.mu_growth_max
-        {
+        if can_raise && primal > opts.tol_primal && checks_since_best >= opts.stall_checks() {
             // Hysteresis: μ at which the iteration stalled is below the stability threshold;
             // residual balancing never goes back under it (lion_mask SD ping-ponged between
             // halving and raising until μ reached its bound and the iteration diverged).
@@ -426,12 +560,11 @@ pub fn solve(
             checks_since_best = 0;
             checks_since_change = 0;
         } else if opts.balance
-            && !converged
             && primal < opts.balance_primal * opts.tol_primal
             && (dual > opts.tol_dual || energy_change > opts.tol_energy)
-            && checks_since_change >= opts.stall_checks
+            && checks_since_change >= opts.stall_checks()
             && (!accelerating || energy_change < opts.aa_balance_energy)
-            && mu_rel / 2.0 >= (opts.initial_mu_rel() / opts.mu_shrink_max).max(mu_floor)
+            && mu_rel / 2.0 >= (opts.initial_mu_rel() / opts.mu_shrink_max()).max(mu_floor)
         {
             // Residual balancing (Boyd et al. 2011, §3.4.1) in its safe half: the consensus is
             // already tight (a quarter of its tolerance) while the maps still move (dual residual
@@ -452,32 +585,26 @@ pub fn solve(
         }
         progress(&h);
         history.push(h);
-        if converged {
-            break;
-        }
     }
-    debug_assert!(
-        converged || interrupted || it >= opts.max_iters,
-        "the loop only exits early when converged or stopped"
-    );
-    if interrupted {
+    if stop == AdmmStop::Interrupted {
         let st = exec.download()?;
         recover(&st.a, &mut uv)?;
-        let (e, flips) = map_energy(problem, faces, &uv, opts.energy);
-        if flips == 0 && e <= best {
-            best_uv.clone_from(&uv);
-            best_flips = 0;
-        }
+        best.offer(problem, faces, &uv, opts.energy);
     }
+    let converged = stop == AdmmStop::Converged;
     Ok(AdmmResult {
-        uv: best_uv,
+        uv: best.uv,
         iterations: it,
         converged,
-        interrupted,
+        interrupted: stop == AdmmStop::Interrupted,
+        stop,
         mu_rel_final: mu_rel,
         history,
-        flips: best_flips,
+        flips: best.flips,
+        energy: best.energy,
         backend: exec.backend(),
         device: exec.device(),
+        tol_primal: opts.tol_primal,
+        tol_dual: opts.tol_dual,
     })
 }

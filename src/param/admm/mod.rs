@@ -25,7 +25,7 @@ pub mod kernels;
 pub mod layout;
 pub mod vulkan;
 
-pub use driver::{solve, Accel, AdmmOptions, AdmmResult, Backend, History};
+pub use driver::{solve, Accel, AdmmOptions, AdmmResult, AdmmStop, Backend, History};
 
 use crate::mesh::{FaceFrames, Topology, TriMesh, NO_FACE};
 

@@ -1,0 +1,335 @@
+//! The cutting path of `foldfree param`: meshes that are not one disk (closed, any genus,
+//! several holes or components) are cut into disk charts, each chart is mapped by
+//! [`compute_map`], and the charts are packed into the unit square.
+#![forbid(unsafe_code)]
+
+use std::path::Path;
+use std::time::Instant;
+
+use crate::init::{initial_map, InitMethod};
+use crate::mesh::{self, Topology, TriMesh};
+use crate::metrics;
+use crate::param::admm::History;
+use crate::param::job::{ParamJob, ParamOutput};
+use crate::param::map::{compute_map, MapOutput, SolverPath};
+use crate::param::AdmmOptions;
+use crate::report::ParamReport;
+use crate::{Error, Result};
+
+/// The cutting path of [`crate::param::job::run_param`]: cut into disk charts, map each chart, pack the charts
+/// into [0,1]², write the OBJ with the input's `v` (count and order) and one `vt` per split
+/// vertex (`f v/vt`), and report seams, charts and packing.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_atlas(
+    job: &ParamJob,
+    input: TriMesh,
+    topo: &Topology,
+    vreport: &mesh::ValidationReport,
+    admm: &AdmmOptions,
+    ctx: Option<&crate::gpu::Context>,
+    t0: Instant,
+    t_load: f64,
+    progress: &mut dyn FnMut(&History),
+) -> Result<ParamOutput> {
+    use crate::param::{cut, pack};
+    let t_cut = Instant::now();
+    let mut cutm = cut::cut_to_disks(&input, topo, &job.cut_options, &job.input)?;
+    let mut extra = Vec::new();
+    while extra.len() < job.cut_options.extra_seams {
+        match most_shrunk_vertex(&cutm, &job.input)? {
+            Some((v, ratio)) if ratio > job.cut_options.stretch_limit => extra.push(v),
+            _ => break,
+        }
+        cutm = cut::cut_to_disks_through(&input, topo, &job.cut_options, &job.input, &extra)?;
+    }
+    let mut seconds_cut = t_cut.elapsed().as_secs_f64();
+
+    // Map every chart; while some chart's boundary overlaps itself in UV, split it across
+    // the overlap and map the two halves (charts left whole keep their maps).
+    let mut base = cut::base_cut(&input, topo, &job.cut_options, &job.input, &extra)?;
+    let mut splits: Vec<cut::Split> = Vec::new();
+    let mut failed: Vec<cut::Split> = Vec::new();
+    let mut cache: std::collections::HashMap<Vec<u32>, MapOutput> = Default::default();
+    let maps = loop {
+        let mut maps = Vec::with_capacity(cutm.charts.len());
+        let mut new_splits = Vec::new();
+        for faces in &cutm.charts {
+            let (sub, global) = cutm.chart_mesh(faces);
+            let sub_topo = Topology::build(&sub, &job.input)?;
+            let map = match cache.remove(faces) {
+                Some(m) => m,
+                None => compute_map(
+                    &sub,
+                    &sub_topo,
+                    job.init,
+                    job.solver,
+                    admm,
+                    ctx,
+                    job.profile,
+                    progress,
+                )?,
+            };
+            let candidates = overlap_splits(&map.uv, &sub_topo, &global, &cutm.origin, faces);
+            if !candidates.is_empty() {
+                new_splits.push(candidates);
+            }
+            maps.push(map);
+        }
+        // Per overlapping chart, the first candidate seam that really splits it.
+        let t = Instant::now();
+        let before = splits.len();
+        for candidates in new_splits {
+            if splits.len() >= job.cut_options.overlap_splits {
+                break;
+            }
+            for sp in candidates {
+                if failed.contains(&sp) {
+                    continue;
+                }
+                if base.try_split(topo, &sp) {
+                    splits.push(sp);
+                    break;
+                }
+                failed.push(sp);
+            }
+        }
+        if splits.len() == before {
+            break maps; // nothing overlaps, or no seam could split what does
+        }
+        let recut = base.finish(&input, topo, &job.input)?;
+        seconds_cut += t.elapsed().as_secs_f64();
+        for (faces, map) in cutm.charts.iter().zip(maps) {
+            cache.insert(faces.clone(), map);
+        }
+        cutm = recut;
+    };
+
+    let mut uv = vec![[0.0f64; 2]; cutm.mesh.positions.len()];
+    let mut chart_meshes = Vec::with_capacity(cutm.charts.len());
+    let mut report = ParamReport {
+        init: job.init.name().into(),
+        backend: "cpu".into(),
+        device: "host CPU".into(),
+        solver: "none".into(),
+        ..ParamReport::default()
+    };
+    let mut seconds_init = 0.0;
+    let mut seconds_solve = 0.0;
+    let mut converged = true;
+    let mut path = SolverPath::None;
+    let mut stop = String::new();
+    let mut largest = 0usize;
+    for (faces, map) in cutm.charts.iter().zip(maps) {
+        let (sub, global) = cutm.chart_mesh(faces);
+        for (l, &g) in global.iter().enumerate() {
+            uv[g as usize] = map.uv[l];
+        }
+        seconds_init += map.seconds_init;
+        seconds_solve += map.seconds_solve;
+        report.init_flips += map.init_flips;
+        converged &= map.converged;
+        path = path.combine(map.path);
+        // The report's stop line, convergence plot and global history show the largest chart.
+        let is_largest = faces.len() > largest;
+        if is_largest {
+            largest = faces.len();
+            stop = map.stop_summary();
+        }
+        if let Some(result) = &map.admm {
+            report.backend = result.backend.into();
+            report.device.clone_from(&result.device);
+            report.iterations_admm += result.iterations;
+            if is_largest {
+                report.history.clone_from(&result.history);
+                report.mu_rel = Some(result.mu_rel_final);
+            }
+        }
+        if let Some(result) = map.global {
+            report.iterations_global += result.iterations;
+            if is_largest {
+                report.global = Some(result);
+            }
+        }
+        chart_meshes.push((global, sub));
+    }
+    report.iterations = report.iterations_admm + report.iterations_global;
+    if job.solver != crate::param::map::SolverChoice::None {
+        report.solver = job.solver.name().into();
+        report.solver_path = path.name().into();
+        report.converged = Some(converged);
+        report.energy = Some(admm.energy.name().into());
+        report.stop = stop;
+    }
+
+    let frames = mesh::frames::compute(&cutm.mesh);
+    let chart_faces: Vec<Vec<[u32; 3]>> = cutm
+        .charts
+        .iter()
+        .map(|fs| fs.iter().map(|&f| cutm.mesh.faces[f as usize]).collect())
+        .collect();
+    let refs: Vec<pack::ChartRef> = chart_meshes
+        .iter()
+        .zip(&chart_faces)
+        .zip(&cutm.charts)
+        .map(|(((global, _), faces), fs)| pack::ChartRef {
+            vertices: global,
+            faces,
+            area_3d: fs.iter().map(|&f| frames.area[f as usize]).sum(),
+        })
+        .collect();
+    let packing = pack::pack(&mut uv, &refs, &job.pack);
+
+    let split_topo = Topology::build(&cutm.mesh, &job.input)?;
+    let m = metrics::evaluate(
+        &cutm.mesh.positions,
+        &cutm.mesh.faces,
+        &uv,
+        &split_topo.boundary_loops,
+    );
+    if m.flips > 0 || uv.iter().any(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        return Err(crate::linalg::SolveError::Failed {
+            what: format!(
+                "the packed atlas has {} flipped faces or non-finite UVs; nothing was written",
+                m.flips
+            ),
+        }
+        .into());
+    }
+    mesh::obj::write_obj_with_corner_uv(&job.output, &input, &uv, &cutm.mesh.faces).map_err(
+        |source| Error::Io {
+            path: job.output.clone(),
+            source,
+        },
+    )?;
+    report.written = true;
+
+    report.input = job.input.display().to_string();
+    report.output = job.output.display().to_string();
+    report.vertices = input.positions.len();
+    report.faces = input.faces.len();
+    report.interior_edges = topo.interior_edges.len() - cutm.seam_edges.len();
+    report.boundary_loops = topo.boundary_loops.len();
+    report.unreferenced_vertices = vreport.unreferenced_vertices.len();
+    report.set_metrics(&m);
+    report.atlas = Some(crate::report::AtlasReport {
+        charts: cutm.charts.len(),
+        chart_faces: cutm.charts.iter().map(Vec::len).collect(),
+        texture_coordinates: uv.len(),
+        seam_edges: cutm.seam_edges.len(),
+        seam_length: cutm.seam_length,
+        genus: topo.genus(),
+        components: topo.components,
+        packing_efficiency: packing.efficiency,
+        margin: job.pack.margin,
+        extra_seams: extra.len(),
+        overlap_splits: splits.len(),
+        seconds_cut,
+    });
+    report.seconds_load = t_load;
+    report.seconds_init = seconds_init;
+    report.seconds_solve = seconds_solve;
+    report.seconds = t0.elapsed().as_secs_f64();
+    Ok(ParamOutput {
+        mesh: cutm.mesh,
+        uv,
+        report,
+    })
+}
+
+/// Where to split a chart whose UV boundary crosses itself: for each of the first few
+/// crossing pairs of boundary segments, a seam between the midpoints of the two boundary arcs
+/// that separate them, so each half holds one of the two segments. Empty when the boundary is
+/// simple. Several candidates because a seam can fail to exist (no path through the chart's
+/// interior between the two points).
+fn overlap_splits(
+    uv: &[[f64; 2]],
+    topo: &Topology,
+    global: &[u32],
+    origin: &[u32],
+    faces: &[u32],
+) -> Vec<crate::param::cut::Split> {
+    const CANDIDATES: usize = 4;
+    let Some(&face) = faces.first() else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for [s1, s2] in metrics::boundary_intersecting_pairs(uv, &topo.boundary_loops) {
+        if out.len() == CANDIDATES {
+            break;
+        }
+        let Some(l) = topo.boundary_loops.iter().find(|l| l.contains(&s1[0])) else {
+            continue;
+        };
+        let n = l.len();
+        let pos = |v: u32| l.iter().position(|&w| w == v);
+        let (Some(mut i), Some(mut j)) = (pos(s1[0]), pos(s2[0])) else {
+            continue;
+        };
+        if i > j {
+            std::mem::swap(&mut i, &mut j);
+        }
+        let input = |k: usize| origin[global[l[k % n] as usize] as usize];
+        let a = input((i + 1 + j) / 2);
+        let m2 = (j + 1 + i + n) / 2;
+        // Both sides of a seam are on the boundary: step on if the midpoints are one input
+        // vertex.
+        let Some(b) = (0..n).map(|d| input(m2 + d)).find(|&b| b != a) else {
+            continue;
+        };
+        let sp = crate::param::cut::Split { a, b, face };
+        if !out.contains(&sp) {
+            out.push(sp);
+        }
+    }
+    out
+}
+
+/// The input vertex around which a conformal (LSCM) map of its chart shrinks area the most,
+/// with that shrink: (3D area share / UV area share), averaged over the vertex's faces by 3D
+/// area. Conformal maps of long protrusions (ears, limbs, tails) shrink them exponentially; a
+/// seam to the worst tip relieves it. `None` when no chart could be mapped.
+fn most_shrunk_vertex(
+    cutm: &crate::param::cut::CutMesh,
+    file: &Path,
+) -> Result<Option<(u32, f64)>> {
+    let mut worst: Option<(u32, f64)> = None;
+    for faces in &cutm.charts {
+        if faces.len() < 2 {
+            continue;
+        }
+        let (sub, global) = cutm.chart_mesh(faces);
+        let sub_topo = Topology::build(&sub, file)?;
+        let Ok(uv) = initial_map(&sub, &sub_topo, InitMethod::Lscm) else {
+            continue;
+        };
+        let frames = mesh::frames::compute(&sub);
+        let area_uv: Vec<f64> = sub
+            .faces
+            .iter()
+            .map(|f| crate::init::face_area_2d(&uv, f))
+            .collect();
+        let (t3, tuv): (f64, f64) = (frames.area.iter().sum(), area_uv.iter().sum());
+        if !(t3 > 0.0 && tuv > 0.0) {
+            continue;
+        }
+        let mut num = vec![0.0f64; sub.positions.len()];
+        let mut den = vec![0.0f64; sub.positions.len()];
+        for (f, tri) in sub.faces.iter().enumerate() {
+            let a3 = frames.area[f] / t3;
+            let r = a3 / (area_uv[f] / tuv).max(1e-300);
+            for &v in tri {
+                num[v as usize] += a3 * r.min(1e12);
+                den[v as usize] += a3;
+            }
+        }
+        for v in 0..sub.positions.len() {
+            if den[v] > 0.0 {
+                let ratio = num[v] / den[v];
+                if worst.map_or(true, |w| ratio > w.1) {
+                    worst = Some((cutm.origin[global[v] as usize], ratio));
+                }
+            }
+        }
+    }
+    Ok(worst)
+}

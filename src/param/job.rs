@@ -1,0 +1,241 @@
+//! The `foldfree param` job, usable by any host: load and validate, map (one disk, or an atlas
+//! of charts), measure, write. The CLI only parses arguments, prints, and maps the result to an
+//! exit code (0 converged, 3 written but not converged, 2 bad input, 1 anything else).
+#![forbid(unsafe_code)]
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::init::InitMethod;
+use crate::mesh::{self, TriMesh};
+use crate::metrics;
+use crate::param::admm::{AdmmOptions, History};
+use crate::param::atlas::run_atlas;
+use crate::param::map::{compute_map, SolverChoice};
+use crate::param::Energy;
+use crate::report::ParamReport;
+use crate::{Error, Result};
+
+/// Where ADMM runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendChoice {
+    /// Vulkan on a real GPU; the CPU backend when the only device is a CPU rasterizer or none.
+    Auto,
+    Cpu,
+    Vulkan,
+}
+
+/// When `foldfree param` cuts the mesh into disk charts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum CutMode {
+    /// Cut only meshes that are not a single disk (closed, higher genus, several holes, several
+    /// components).
+    #[default]
+    Auto,
+    /// Never cut: a mesh that is not a disk is an error.
+    Never,
+    /// Always go through the cutting and packing path, even for a disk (one chart, packed into
+    /// the unit square).
+    Always,
+}
+
+/// Everything `foldfree param` needs.
+#[derive(Clone, Debug)]
+pub struct ParamJob {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub init: InitMethod,
+    pub solver: SolverChoice,
+    pub backend: BackendChoice,
+    /// Vulkan device name substring or index.
+    pub device: Option<String>,
+    pub validation: bool,
+    /// Per-kernel device times from timestamp queries (Vulkan backend; slows the run down,
+    /// since every iteration is then its own submission).
+    pub profile: bool,
+    /// The energy; `None` picks MIPS (conformal) for a disk and symmetric Dirichlet
+    /// (isometric) for a mesh cut into charts, where a conformal map shrinks protrusions
+    /// (limbs, ears) by orders of magnitude and texel density with them.
+    pub energy: Option<Energy>,
+    /// ADMM settings; its `energy` is replaced by the one the job resolves (see `energy`).
+    pub admm: AdmmOptions,
+    pub validate: mesh::validate::ValidateOptions,
+    pub cut: CutMode,
+    pub cut_options: crate::param::cut::CutOptions,
+    pub pack: crate::param::pack::PackOptions,
+}
+
+impl ParamJob {
+    /// A job with the documented defaults: LSCM start, ADMM (MIPS on a disk, SD on an atlas),
+    /// automatic backend.
+    pub fn new(input: impl Into<PathBuf>, output: impl Into<PathBuf>) -> ParamJob {
+        ParamJob {
+            input: input.into(),
+            output: output.into(),
+            init: InitMethod::Lscm,
+            solver: SolverChoice::Admm,
+            backend: BackendChoice::Auto,
+            device: None,
+            validation: false,
+            profile: false,
+            energy: None,
+            admm: AdmmOptions::default(),
+            validate: mesh::validate::ValidateOptions::default(),
+            cut: CutMode::Auto,
+            cut_options: Default::default(),
+            pack: Default::default(),
+        }
+    }
+}
+
+/// Output of [`run_param`]: the map and its report (the map already written to `job.output`;
+/// `report.converged` says whether the stop test was met).
+pub struct ParamOutput {
+    /// The mesh the UVs belong to: the input, or the input split along its seams when it was
+    /// cut (same faces in the same order, one vertex per UV).
+    pub mesh: TriMesh,
+    /// One UV per vertex of `mesh`.
+    pub uv: Vec<[f64; 2]>,
+    pub report: ParamReport,
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
+/// Opens a Vulkan context for `job`, or says why the CPU backend runs instead.
+fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
+    use crate::gpu::{Context, ContextDesc};
+    let desc = ContextDesc {
+        validation: job.validation,
+        device: job.device.clone(),
+        ..ContextDesc::default()
+    };
+    match job.backend {
+        BackendChoice::Cpu => Ok(None),
+        BackendChoice::Vulkan => Ok(Some(Context::new(&desc)?)),
+        BackendChoice::Auto => match Context::new(&desc) {
+            // A CPU "GPU" (lavapipe) is slower than the native f64 backend on the same cores.
+            Ok(ctx) if ctx.device_type() == crate::gpu::vk::PhysicalDeviceType::CPU => Ok(None),
+            Ok(ctx) => Ok(Some(ctx)),
+            Err(e) if e.is_unavailable() => Ok(None),
+            Err(e) => Err(e.into()),
+        },
+    }
+}
+
+/// `foldfree param`: load and validate, start map, solve, recover, measure, write the OBJ
+/// (atomically; never over the input). `progress` sees every residual check.
+pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<ParamOutput> {
+    let t0 = Instant::now();
+    if same_file(&job.input, &job.output) {
+        return Err(Error::Usage(format!(
+            "refusing to overwrite the input {}",
+            job.input.display()
+        )));
+    }
+    let (mesh, topo, vreport) = mesh::load(&job.input, &job.validate)?;
+    if job.cut == CutMode::Never || (job.cut == CutMode::Auto && topo.is_disk()) {
+        topo.require_disk(&job.input)?;
+    }
+    let t_load = t0.elapsed().as_secs_f64();
+
+    let ctx = if job.solver == SolverChoice::Admm {
+        choose_backend(job)?
+    } else {
+        None
+    };
+    let atlas = job.cut == CutMode::Always || !topo.is_disk();
+    let mut admm = job.admm.clone();
+    admm.energy = job.energy.unwrap_or(if atlas {
+        Energy::SymmetricDirichlet
+    } else {
+        Energy::Mips
+    });
+    if atlas {
+        return run_atlas(
+            job,
+            mesh,
+            &topo,
+            &vreport,
+            &admm,
+            ctx.as_ref(),
+            t0,
+            t_load,
+            progress,
+        );
+    }
+    let map = compute_map(
+        &mesh,
+        &topo,
+        job.init,
+        job.solver,
+        &admm,
+        ctx.as_ref(),
+        job.profile,
+        progress,
+    )?;
+    let m = metrics::evaluate(&mesh.positions, &mesh.faces, &map.uv, &topo.boundary_loops);
+    // compute_map returns flip-free maps only: every one is written.
+    mesh::obj::write_obj_with_uv(&job.output, &mesh, &map.uv).map_err(|source| Error::Io {
+        path: job.output.clone(),
+        source,
+    })?;
+
+    let mut report = ParamReport {
+        init: job.init.name().into(),
+        init_flips: map.init_flips,
+        backend: "cpu".into(),
+        device: "host CPU".into(),
+        solver: job.solver.name().into(),
+        solver_path: map.path.name().into(),
+        stop: map.stop_summary(),
+        written: true,
+        ..ParamReport::default()
+    };
+    if job.solver != SolverChoice::None {
+        report.energy = Some(admm.energy.name().into());
+        report.converged = Some(map.converged);
+    }
+    let uv = map.uv;
+    report.kernel_times = map.kernel_times;
+    report.bytes_per_iteration = map.bytes_per_iteration;
+    if let Some(result) = map.admm {
+        report.backend = result.backend.into();
+        report.device = result.device;
+        report.iterations_admm = result.iterations;
+        report.mu_rel = Some(result.mu_rel_final);
+        report.history = result.history;
+    }
+    if let Some(result) = map.global {
+        report.iterations_global = result.iterations;
+        report.global = Some(result);
+    }
+    report.iterations = report.iterations_admm + report.iterations_global;
+    report.input = job.input.display().to_string();
+    report.output = job.output.display().to_string();
+    report.vertices = mesh.positions.len();
+    report.faces = mesh.faces.len();
+    report.interior_edges = topo.interior_edges.len();
+    report.boundary_loops = topo.boundary_loops.len();
+    report.unreferenced_vertices = vreport.unreferenced_vertices.len();
+    report.set_metrics(&m);
+    report.seconds_load = t_load;
+    report.seconds_init = map.seconds_init;
+    report.seconds_solve = map.seconds_solve;
+    report.seconds = t0.elapsed().as_secs_f64();
+    Ok(ParamOutput { mesh, uv, report })
+}
+
+/// Writes `report` as pretty JSON, atomically.
+pub fn write_report(path: &Path, report: &ParamReport) -> Result<()> {
+    let text =
+        serde_json::to_string_pretty(report).map_err(|e| Error::Usage(format!("report: {e}")))?;
+    mesh::obj::write_atomic(path, text.as_bytes()).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}

@@ -1,0 +1,307 @@
+//! The map of one disk (a whole disk mesh or one chart of an atlas): start map → solver →
+//! the checks that keep a flipped or non-finite map from ever being returned.
+//!
+//! The default pipeline cannot end without a flip-free map on a valid disk. ADMM runs first (it
+//! is the GPU path); when it stops without meeting its stop test — it stalled (μ at its cap and
+//! no progress, see [`crate::param::admm::driver`]) or used up its iterations — it hands its best
+//! flip-free map to the global solver ([`crate::param::global`]), whose every step is flip-free
+//! and decreases the energy (largest flip-free step, then Armijo backtracking). So the result is
+//! never worse than ADMM's best map, and the global solver's own stop test decides convergence.
+//! [`SolverPath`] names what ran. Ctrl-C ends the run with the best map so far, no hand-off.
+#![forbid(unsafe_code)]
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::init::{initial_map, normalize_area, InitMethod, TutteWeights};
+use crate::mesh::{self, Topology, TriMesh};
+use crate::param::admm::{self, AdmmOptions, AdmmProblem, History};
+use crate::param::global::{self, GlobalOptions};
+use crate::Result;
+
+/// Which solver runs after the start map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolverChoice {
+    /// Output the start map as is.
+    None,
+    /// ADMM on the chosen backend; the global solver finishes when ADMM stops short.
+    Admm,
+    /// The global proxy/Newton solver ([`crate::param::global`]) on the CPU.
+    Global,
+}
+
+impl SolverChoice {
+    /// The name the CLI and the report use.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverChoice::None => "none",
+            SolverChoice::Admm => "admm",
+            SolverChoice::Global => "global",
+        }
+    }
+}
+
+/// The solvers that produced a map, in order.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub enum SolverPath {
+    /// The start map.
+    #[default]
+    #[serde(rename = "none")]
+    None,
+    /// ADMM alone (it met its stop test, or was interrupted).
+    #[serde(rename = "admm")]
+    Admm,
+    /// ADMM, then the global solver from ADMM's best flip-free map.
+    #[serde(rename = "admm+global")]
+    AdmmGlobal,
+    /// The global solver alone.
+    #[serde(rename = "global")]
+    Global,
+}
+
+impl SolverPath {
+    /// The name the report and the CLI use.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverPath::None => "none",
+            SolverPath::Admm => "admm",
+            SolverPath::AdmmGlobal => "admm+global",
+            SolverPath::Global => "global",
+        }
+    }
+
+    /// The path of several charts: the longest any chart took (`admm+global` once one chart
+    /// needed the hand-off).
+    pub fn combine(self, other: SolverPath) -> SolverPath {
+        let rank = |p: SolverPath| match p {
+            SolverPath::None => 0,
+            SolverPath::Admm => 1,
+            SolverPath::Global => 2,
+            SolverPath::AdmmGlobal => 3,
+        };
+        if rank(other) > rank(self) {
+            other
+        } else {
+            self
+        }
+    }
+}
+
+/// What [`compute_map`] produced.
+pub struct MapOutput {
+    /// #V flip-free, finite UVs.
+    pub uv: Vec<[f64; 2]>,
+    /// Flipped faces of the start map.
+    pub init_flips: usize,
+    /// The ADMM run, when it ran.
+    pub admm: Option<admm::AdmmResult>,
+    /// The global solver's run, when it ran (alone, or after ADMM's hand-off).
+    pub global: Option<global::GlobalResult>,
+    pub path: SolverPath,
+    /// Whether the last solver that ran met its stop test (true when no solver ran).
+    pub converged: bool,
+    /// Per-kernel device times (Vulkan with `profile`).
+    pub kernel_times: Option<admm::vulkan::KernelTimes>,
+    /// Bytes the kernels move per iteration (Vulkan).
+    pub bytes_per_iteration: Option<u64>,
+    pub seconds_init: f64,
+    pub seconds_solve: f64,
+}
+
+impl MapOutput {
+    /// One line saying why the run stopped, and how far from its stop test when it did not
+    /// meet it.
+    pub fn stop_summary(&self) -> String {
+        let admm = self.admm.as_ref().map(|r| r.stop_summary());
+        let global = self.global.as_ref().map(|g| g.stop_summary());
+        match (admm, global) {
+            (Some(a), Some(g)) => format!("{a}; handed to the global solver: {g}"),
+            (Some(a), None) => a,
+            (None, Some(g)) => g,
+            (None, None) => "start map only".into(),
+        }
+    }
+}
+
+/// A flip-free map at the 3D area, the map of last resort: Floater's mean-value Tutte map
+/// (positive weights, so an embedding on the convex boundary, and far less compressed than
+/// uniform weights where the surface is curved, which is where a solver started from it spends
+/// its iterations), or the uniform one should rounding fold a thin face of the former.
+fn tutte_map(mesh: &TriMesh, topo: &Topology, area_3d: f64) -> Result<Vec<[f64; 2]>> {
+    for w in [TutteWeights::MeanValue, TutteWeights::Uniform] {
+        let Ok(mut t) = initial_map(mesh, topo, InitMethod::Tutte(w)) else {
+            continue;
+        };
+        if crate::init::count_flips(&mesh.faces, &t) == 0 {
+            normalize_area(mesh, &mut t, area_3d);
+            return Ok(t);
+        }
+    }
+    let mut t = initial_map(mesh, topo, InitMethod::Tutte(TutteWeights::Uniform))?;
+    normalize_area(mesh, &mut t, area_3d);
+    Ok(t)
+}
+
+/// The map of a validated disk mesh, shared by the CLI job and embedding hosts: start map, a
+/// Tutte safety net when the start map folds, ADMM on `ctx` (Vulkan) or on the CPU with the
+/// hand-off to the global solver (module docs), and the checks that keep a flipped or
+/// non-finite map from ever being returned. With a context, any validation message it collected
+/// fails the run.
+#[allow(clippy::too_many_arguments)]
+pub fn compute_map(
+    mesh: &TriMesh,
+    topo: &Topology,
+    init: InitMethod,
+    solver: SolverChoice,
+    opts: &AdmmOptions,
+    ctx: Option<&crate::gpu::Context>,
+    profile: bool,
+    progress: &mut dyn FnMut(&History),
+) -> Result<MapOutput> {
+    let t1 = Instant::now();
+    let frames = mesh::frames::compute(mesh);
+    let area_3d: f64 = frames.area.iter().sum();
+    let mut uv = initial_map(mesh, topo, init)?;
+    normalize_area(mesh, &mut uv, area_3d);
+    let init_flips = crate::init::count_flips(&mesh.faces, &uv);
+    let seconds_init = t1.elapsed().as_secs_f64();
+
+    let t2 = Instant::now();
+    let mut out = MapOutput {
+        uv: Vec::new(),
+        init_flips,
+        admm: None,
+        global: None,
+        path: SolverPath::None,
+        converged: true,
+        kernel_times: None,
+        bytes_per_iteration: None,
+        seconds_init,
+        seconds_solve: 0.0,
+    };
+    let global_opts = GlobalOptions {
+        stop: opts.stop.clone(),
+        ..GlobalOptions::for_energy(opts.energy)
+    };
+    match solver {
+        SolverChoice::None => {}
+        SolverChoice::Admm => {
+            let problem = AdmmProblem::new(mesh, topo, &frames);
+            // A start map with flips (LSCM can fold) gets a flip-free safety net: never
+            // output a flipped map because the solver could not unfold one.
+            let fallback = if init_flips > 0 {
+                Some(tutte_map(mesh, topo, area_3d)?)
+            } else {
+                None
+            };
+            let result = run_admm(
+                &problem,
+                mesh,
+                &uv,
+                fallback.as_deref(),
+                opts,
+                ctx,
+                profile,
+                progress,
+                &mut out,
+            )?;
+            uv.clone_from(&result.uv);
+            out.path = SolverPath::Admm;
+            out.converged = result.converged;
+            if !result.converged && !result.interrupted {
+                // The hand-off: from ADMM's best flip-free map (the start map or Tutte at
+                // worst), every step of the global solver is flip-free and lowers the energy.
+                if result.flips > 0 {
+                    uv = tutte_map(mesh, topo, area_3d)?;
+                }
+                let g = global::solve(mesh, &frames, &uv, &global_opts, &mut |_| {})?;
+                uv.clone_from(&g.uv);
+                out.path = SolverPath::AdmmGlobal;
+                out.converged = g.converged();
+                out.global = Some(g);
+            }
+            out.admm = Some(result);
+        }
+        SolverChoice::Global => {
+            // A folded start (LSCM can fold) is replaced by uniform Tutte: the solver never
+            // crosses det = 0, so it cannot unfold.
+            if init_flips > 0 {
+                uv = tutte_map(mesh, topo, area_3d)?;
+            }
+            let g = global::solve(mesh, &frames, &uv, &global_opts, &mut |_| {})?;
+            uv.clone_from(&g.uv);
+            out.path = SolverPath::Global;
+            out.converged = g.converged();
+            out.global = Some(g);
+        }
+    }
+    out.seconds_solve = t2.elapsed().as_secs_f64();
+    let flips = crate::init::count_flips(&mesh.faces, &uv);
+    if flips > 0 {
+        return Err(crate::linalg::SolveError::Failed {
+            what: format!(
+                "the map has {flips} flipped faces (start map: {init_flips} flips); nothing was written"
+            ),
+        }
+        .into());
+    }
+    if uv.iter().any(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        return Err(crate::linalg::SolveError::NonFinite {
+            what: "UV coordinates".into(),
+        }
+        .into());
+    }
+    out.uv = uv;
+    Ok(out)
+}
+
+/// ADMM on `ctx` (Vulkan) or on the CPU; device times and validation messages go into `out`.
+#[allow(clippy::too_many_arguments)]
+fn run_admm(
+    problem: &AdmmProblem,
+    mesh: &TriMesh,
+    uv: &[[f64; 2]],
+    fallback: Option<&[[f64; 2]]>,
+    opts: &AdmmOptions,
+    ctx: Option<&crate::gpu::Context>,
+    profile: bool,
+    progress: &mut dyn FnMut(&History),
+    out: &mut MapOutput,
+) -> Result<admm::AdmmResult> {
+    let mut solve = |exec: &mut dyn admm::driver::Executor| {
+        admm::solve(problem, &mesh.faces, uv, fallback, opts, exec, progress)
+    };
+    match ctx {
+        Some(_) if opts.accel != admm::Accel::None => Err(crate::Error::Usage(
+            "--accel anderson runs on the CPU backend only (use --backend cpu)".into(),
+        )),
+        Some(ctx) => {
+            let mut exec = admm::vulkan::VulkanExecutor::new(
+                ctx,
+                problem,
+                opts.energy,
+                opts.newton_iters,
+                profile,
+            )?;
+            let r = solve(&mut exec)?;
+            out.kernel_times = exec.kernel_times().cloned();
+            out.bytes_per_iteration = Some(exec.bytes_per_iteration());
+            let messages = ctx.take_validation_messages();
+            if !messages.is_empty() {
+                return Err(crate::gpu::GpuError::Invalid(format!(
+                    "{} Vulkan validation messages, first: {}",
+                    messages.len(),
+                    messages[0]
+                ))
+                .into());
+            }
+            Ok(r)
+        }
+        None => {
+            let mut exec = admm::cpu::CpuExecutor::new(problem, opts.energy, opts.newton_iters)
+                .with_accel(opts.accel, opts.aa_depth, opts.aa_every);
+            solve(&mut exec)
+        }
+    }
+}
