@@ -3,7 +3,7 @@
 //! BENCHMARKS.md section of `--solver global`).
 //!
 //! `cargo run --release --example global_solve -- MESH.obj [sd|mips] [--pre jacobi|ic0|amg]
-//!  [--cap X|none] [--no-exact] [--proxy-switch R] [--cg-proxy T] [--cg-newton T] [--max-iters N] [--lscm] [-q]
+//!  [--cap X|none] [--no-exact] [--proxy-switch R] [--cg-proxy T] [--cg-newton T] [--max-iters N] [--lscm] [--mvc] [-q]
 //!  [--ttq TARGET]`
 //!
 //! `--ttq TARGET` (time to quality) also reruns the (deterministic) solver with an iteration
@@ -29,6 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let mut opts = GlobalOptions::for_energy(energy);
     let mut lscm = false;
+    let mut mvc = false;
     let mut quiet = false;
     let mut ttq: Option<f64> = None;
     let mut it = args.iter().skip(1);
@@ -53,6 +54,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--cg-newton" => opts.cg_tol_newton = val()?.parse()?,
             "--max-iters" => opts.max_iters = val()?.parse()?,
             "--lscm" => lscm = true,
+            "--mvc" => mvc = true,
             "-q" => quiet = true,
             "--ttq" => ttq = Some(val()?.parse()?),
             "sd" | "mips" => {}
@@ -66,7 +68,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let frames = mesh::frames::compute(&m);
     let area: f64 = frames.area.iter().sum();
     let t = std::time::Instant::now();
-    let tutte = InitMethod::Tutte(TutteWeights::Uniform);
+    let tutte = InitMethod::Tutte(if mvc {
+        TutteWeights::MeanValue
+    } else {
+        TutteWeights::Uniform
+    });
     let mut uv = initial_map(&m, &topo, if lscm { InitMethod::Lscm } else { tutte })?;
     if foldfree::init::count_flips(&m.faces, &uv) > 0 {
         // The solver never crosses det = 0: a folded LSCM start is replaced by Tutte.

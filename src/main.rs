@@ -36,7 +36,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// UV-parameterize a disk-topology mesh without flipped triangles.
+    /// UV-parameterize a mesh without flipped triangles (a disk, or any manifold mesh cut into
+    /// charts).
+    #[command(after_help = PARAM_AFTER_HELP)]
     Param(Box<ParamArgs>),
     /// List the Vulkan devices and which one would be used.
     Devices,
@@ -1104,6 +1106,20 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     }
     Ok(())
 }
+
+/// `foldfree param --help`: the hand-off and the exit codes.
+const PARAM_AFTER_HELP: &str = "\
+ADMM (the default solver) stops when its residuals and energy change are under tolerance and
+the recovered map is flip-free. When it stalls (penalty at its cap and no progress) or reaches
+--max-iters, it hands its best flip-free map to the global solver, which converges when its
+energy stops decreasing; the report's solver_path says admm or admm+global.
+
+Exit codes:
+  0  converged; the map was written
+  3  a flip-free map was written, but the stop test was not met (iteration cap, Ctrl-C);
+     the message and the report's `stop` say how far from it the run was
+  2  bad input or usage (nothing written)
+  1  anything else: Vulkan failure, I/O (nothing written)";
 
 fn main() -> ExitCode {
     let cli = Cli::parse();

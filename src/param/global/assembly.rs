@@ -173,10 +173,14 @@ impl Pattern {
         })
     }
 
-    /// Overwrites the values with `Σ_f local[f] + δ·I` (`local[f]` over corners (k, r)),
-    /// `δ = rel_shift · mean diagonal`, and returns δ. The shift keeps the system definite
-    /// along translations and along modes a projection clamped to zero; the right-hand sides
-    /// (gradients) have no translation component, so it does not bias the step there.
+    /// Overwrites the values with `Σ_f local[f] + rel_shift · D` (`local[f]` over corners
+    /// (k, r)), `D` the diagonal of the sum (the mean diagonal for an empty row), and returns
+    /// the mean shift. The shift keeps the system definite along translations and along modes
+    /// a projection clamped to zero; the right-hand sides (gradients) have no translation
+    /// component, so it does not bias the step there. It is relative *per row*: on a map whose
+    /// triangles span many orders of magnitude in size (conformal maps of long protrusions),
+    /// the diagonal spans the square of that, and one shift relative to the mean diagonal would
+    /// damp the Newton step of every ordinary-sized triangle into a gradient step.
     /// Faces sharing a vertex write the same entries, so the per-face blocks are computed in
     /// parallel by the caller and scattered here serially (36 additions per face).
     pub fn fill(&mut self, faces: &[[u32; 3]], local: &[[[f64; 6]; 6]], rel_shift: f64) -> f64 {
@@ -197,11 +201,13 @@ impl Pattern {
             }
         }
         let mean = self.diag.iter().map(|&d| data[d]).sum::<f64>() / self.diag.len().max(1) as f64;
-        let shift = rel_shift * mean;
+        let mut total = 0.0;
         for &d in &self.diag {
+            let shift = rel_shift * if data[d] > 0.0 { data[d] } else { mean };
             data[d] += shift;
+            total += shift;
         }
-        shift
+        total / self.diag.len().max(1) as f64
     }
 }
 
