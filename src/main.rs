@@ -401,8 +401,11 @@ struct ParamArgs {
     /// Start map. Default: lscm with the ADMM solver, tutte otherwise.
     #[arg(long, value_enum)]
     init: Option<InitArg>,
-    #[arg(long, value_enum, default_value = "admm")]
-    solver: SolverArg,
+    /// Solver. Default: admm for a disk (with the hand-off to the global solver when it
+    /// stalls), global for the charts of a mesh cut into an atlas (unless ADMM-only options are
+    /// given).
+    #[arg(long, value_enum)]
+    solver: Option<SolverArg>,
     /// Distortion energy. Default: mips (conformal) for a disk, sd (isometric) for a mesh cut
     /// into charts, where a conformal map shrinks limbs and ears and texel density with them.
     #[arg(long, value_enum)]
@@ -884,11 +887,12 @@ fn run_bench(
 
 fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     let energy = args.energy.map(energy_of);
-    let solver = match args.solver {
+    let explicit_solver = args.solver.map(|s| match s {
         SolverArg::None => SolverChoice::None,
         SolverArg::Admm => SolverChoice::Admm,
         SolverArg::Global => SolverChoice::Global,
-    };
+    });
+    let solver = explicit_solver.unwrap_or(SolverChoice::Admm);
     // The global solver runs on the CPU with its own documented stopping rule.
     let admm_only = args.mu.is_some()
         || args.max_iters.is_some()
@@ -972,6 +976,12 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     let mut job = ParamJob::new(&args.input, &args.output);
     job.init = init;
     job.solver = solver;
+    // ADMM-only options say the user wants ADMM on the charts too.
+    job.atlas_solver = explicit_solver.unwrap_or(if admm_only {
+        SolverChoice::Admm
+    } else {
+        SolverChoice::Global
+    });
     job.backend = match (args.backend, admm_accel_cpu_only) {
         // Anderson acceleration exists on the CPU backend only: `auto` means the CPU then.
         (BackendArg::Auto, true) => BackendChoice::Cpu,

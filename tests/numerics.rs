@@ -282,6 +282,32 @@ fn pcg_reports_non_convergence_when_out_of_iterations() {
     ));
 }
 
+/// A tolerance under the attainable accuracy of CG in f64 (ε·cond: here 1e-20 against a floor
+/// near 1e-16) is met by no solver. Once the recurrence says "converged" and restarting from the
+/// true residual no longer halves it, the solve is returned as converged with the residual it
+/// reached — not reported as a failure — and that residual is at rounding level.
+#[test]
+fn pcg_at_its_attainable_accuracy_is_converged() {
+    let mut rng = Rng(23);
+    let a = random_spd(400, &mut rng);
+    let b: Vec<f64> = (0..400).map(|_| rng.sym()).collect();
+    let mut x = vec![0.0; 400];
+    let opts = CgOptions {
+        tolerance: 1e-20,
+        max_iterations: 20_000,
+        preconditioner: Preconditioner::Jacobi,
+    };
+    let stats = pcg(&a, &b, &mut x, &opts).expect("a solve at rounding level has converged");
+    assert!(stats.relative_residual > opts.tolerance);
+    assert!(
+        stats.relative_residual < 1e-12,
+        "{}",
+        stats.relative_residual
+    );
+    assert!((rel_residual(&a, &b, &x) - stats.relative_residual).abs() < 1e-13);
+    assert!(stats.iterations < opts.max_iterations);
+}
+
 #[test]
 fn ic0_breakdown_on_kershaw_matrix_falls_back_and_still_solves() {
     // Kershaw's SPD matrix: plain IC(0) meets a negative pivot.

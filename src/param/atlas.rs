@@ -11,7 +11,7 @@ use crate::mesh::{self, Topology, TriMesh};
 use crate::metrics;
 use crate::param::admm::History;
 use crate::param::job::{ParamJob, ParamOutput};
-use crate::param::map::{compute_map, MapOutput, SolverPath};
+use crate::param::map::{compute_map, MapOutput, SolverChoice, SolverPath};
 use crate::param::AdmmOptions;
 use crate::report::ParamReport;
 use crate::{Error, Result};
@@ -25,6 +25,7 @@ pub(crate) fn run_atlas(
     input: TriMesh,
     topo: &Topology,
     vreport: &mesh::ValidationReport,
+    solver: SolverChoice,
     admm: &AdmmOptions,
     ctx: Option<&crate::gpu::Context>,
     t0: Instant,
@@ -62,7 +63,7 @@ pub(crate) fn run_atlas(
                     &sub,
                     &sub_topo,
                     job.init,
-                    job.solver,
+                    solver,
                     admm,
                     ctx,
                     job.profile,
@@ -153,8 +154,8 @@ pub(crate) fn run_atlas(
         chart_meshes.push((global, sub));
     }
     report.iterations = report.iterations_admm + report.iterations_global;
-    if job.solver != crate::param::map::SolverChoice::None {
-        report.solver = job.solver.name().into();
+    if solver != SolverChoice::None {
+        report.solver = solver.name().into();
         report.solver_path = path.name().into();
         report.converged = Some(converged);
         report.energy = Some(admm.energy.name().into());

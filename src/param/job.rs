@@ -45,7 +45,12 @@ pub struct ParamJob {
     pub input: PathBuf,
     pub output: PathBuf,
     pub init: InitMethod,
+    /// The solver of a disk mesh.
     pub solver: SolverChoice,
+    /// The solver of each chart of an atlas. The global solver by default: on the corpus'
+    /// closed meshes it reached equal or lower SD than ADMM + hand-off in a fifth to a twelfth
+    /// of the time (BENCHMARKS.md, "Atlas chart solver").
+    pub atlas_solver: SolverChoice,
     pub backend: BackendChoice,
     /// Vulkan device name substring or index.
     pub device: Option<String>,
@@ -74,6 +79,7 @@ impl ParamJob {
             output: output.into(),
             init: InitMethod::Lscm,
             solver: SolverChoice::Admm,
+            atlas_solver: SolverChoice::Global,
             backend: BackendChoice::Auto,
             device: None,
             validation: false,
@@ -143,12 +149,13 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
     }
     let t_load = t0.elapsed().as_secs_f64();
 
-    let ctx = if job.solver == SolverChoice::Admm {
+    let atlas = job.cut == CutMode::Always || !topo.is_disk();
+    let solver = if atlas { job.atlas_solver } else { job.solver };
+    let ctx = if solver == SolverChoice::Admm {
         choose_backend(job)?
     } else {
         None
     };
-    let atlas = job.cut == CutMode::Always || !topo.is_disk();
     let mut admm = job.admm.clone();
     admm.energy = job.energy.unwrap_or(if atlas {
         Energy::SymmetricDirichlet
@@ -161,6 +168,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
             mesh,
             &topo,
             &vreport,
+            solver,
             &admm,
             ctx.as_ref(),
             t0,
@@ -172,7 +180,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
         &mesh,
         &topo,
         job.init,
-        job.solver,
+        solver,
         &admm,
         ctx.as_ref(),
         job.profile,
@@ -190,13 +198,13 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<P
         init_flips: map.init_flips,
         backend: "cpu".into(),
         device: "host CPU".into(),
-        solver: job.solver.name().into(),
+        solver: solver.name().into(),
         solver_path: map.path.name().into(),
         stop: map.stop_summary(),
         written: true,
         ..ParamReport::default()
     };
-    if job.solver != SolverChoice::None {
+    if solver != SolverChoice::None {
         report.energy = Some(admm.energy.name().into());
         report.converged = Some(map.converged);
     }
