@@ -127,14 +127,20 @@ impl MapOutput {
 /// A flip-free map at the 3D area, the map of last resort: Floater's mean-value Tutte map
 /// (positive weights, so an embedding on the convex boundary, and far less compressed than
 /// uniform weights where the surface is curved, which is where a solver started from it spends
-/// its iterations), or the uniform one should rounding fold a thin face of the former.
-fn tutte_map(mesh: &TriMesh, topo: &Topology, area_3d: f64) -> Result<Vec<[f64; 2]>> {
+/// its iterations), or the uniform one should rounding fold a thin face of the former or
+/// `usable` refuse it (an energy that overflows on a face shrunk to nothing).
+fn tutte_map(
+    mesh: &TriMesh,
+    topo: &Topology,
+    area_3d: f64,
+    usable: &dyn Fn(&[[f64; 2]]) -> bool,
+) -> Result<Vec<[f64; 2]>> {
     for w in [TutteWeights::MeanValue, TutteWeights::Uniform] {
         let Ok(mut t) = initial_map(mesh, topo, InitMethod::Tutte(w)) else {
             continue;
         };
-        if crate::init::count_flips(&mesh.faces, &t) == 0 {
-            normalize_area(mesh, &mut t, area_3d);
+        normalize_area(mesh, &mut t, area_3d);
+        if crate::init::count_flips(&mesh.faces, &t) == 0 && usable(&t) {
             return Ok(t);
         }
     }
@@ -184,6 +190,28 @@ pub fn compute_map(
         stop: opts.stop.clone(),
         ..GlobalOptions::for_energy(opts.energy)
     };
+    // The global solver from `uv` (from a Tutte map instead when `uv` folds, or when its energy
+    // overflows — a face shrunk to ~1e-160 of the mean is flip-free but has SD = ∞: the solver
+    // never crosses an infinite barrier, so it could not start), recorded in `out` as `path`.
+    let finite = |uv: &[[f64; 2]]| {
+        global::objective_and_gradient(mesh, &frames, opts.energy, uv)
+            .is_ok_and(|(e, _)| e.is_finite())
+    };
+    let finish_globally = |uv: &mut Vec<[f64; 2]>,
+                           folded: bool,
+                           path: SolverPath,
+                           out: &mut MapOutput|
+     -> Result<()> {
+        if folded || !finite(uv) {
+            *uv = tutte_map(mesh, topo, area_3d, &finite)?;
+        }
+        let g = global::solve(mesh, &frames, uv, &global_opts, &mut |_| {})?;
+        uv.clone_from(&g.uv);
+        out.path = path;
+        out.converged = g.converged();
+        out.global = Some(g);
+        Ok(())
+    };
     match solver {
         SolverChoice::None => {}
         SolverChoice::Admm => {
@@ -191,7 +219,7 @@ pub fn compute_map(
             // A start map with flips (LSCM can fold) gets a flip-free safety net: never
             // output a flipped map because the solver could not unfold one.
             let fallback = if init_flips > 0 {
-                Some(tutte_map(mesh, topo, area_3d)?)
+                Some(tutte_map(mesh, topo, area_3d, &finite)?)
             } else {
                 None
             };
@@ -212,28 +240,12 @@ pub fn compute_map(
             if !result.converged && !result.interrupted {
                 // The hand-off: from ADMM's best flip-free map (the start map or Tutte at
                 // worst), every step of the global solver is flip-free and lowers the energy.
-                if result.flips > 0 {
-                    uv = tutte_map(mesh, topo, area_3d)?;
-                }
-                let g = global::solve(mesh, &frames, &uv, &global_opts, &mut |_| {})?;
-                uv.clone_from(&g.uv);
-                out.path = SolverPath::AdmmGlobal;
-                out.converged = g.converged();
-                out.global = Some(g);
+                finish_globally(&mut uv, result.flips > 0, SolverPath::AdmmGlobal, &mut out)?;
             }
             out.admm = Some(result);
         }
         SolverChoice::Global => {
-            // A folded start (LSCM can fold) is replaced by uniform Tutte: the solver never
-            // crosses det = 0, so it cannot unfold.
-            if init_flips > 0 {
-                uv = tutte_map(mesh, topo, area_3d)?;
-            }
-            let g = global::solve(mesh, &frames, &uv, &global_opts, &mut |_| {})?;
-            uv.clone_from(&g.uv);
-            out.path = SolverPath::Global;
-            out.converged = g.converged();
-            out.global = Some(g);
+            finish_globally(&mut uv, init_flips > 0, SolverPath::Global, &mut out)?;
         }
     }
     out.seconds_solve = t2.elapsed().as_secs_f64();
