@@ -4,7 +4,8 @@
 Usage: python3 benches/ttq.py --bin target/release/foldfree [--energy mips|sd] [--runs N] MESH.obj...
 
 For every mesh, alternately (so both see the same machine state): libigl SLIM to convergence
-(benches/slim_peer.py: harmonic start, change of the energy < 1e-6 relative per iteration) and
+(benches/slim_peer.py: harmonic start, change of the energy < 1e-6 relative per iteration, or
+the iteration count of its converged reference run with `--slim-ref`) and
 `foldfree param` with default options on the CPU backend. Repeats `--runs` times and keeps the
 median of each. Prints one JSON line per mesh and a markdown table: SLIM precompute + solve
 seconds, foldfree init + solve seconds (the report's `seconds_init + seconds_solve`; loading the
@@ -24,9 +25,10 @@ import tempfile
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def slim(mesh, energy):
+def slim(mesh, energy, max_iters):
     kind = "conformal" if energy == "mips" else "sd"
-    out = subprocess.run([sys.executable, os.path.join(HERE, "slim_peer.py"), mesh, kind, "5000"],
+    out = subprocess.run([sys.executable, os.path.join(HERE, "slim_peer.py"), mesh, kind,
+                          str(max_iters)],
                          check=True, capture_output=True, text=True).stdout
     r = json.loads(out.strip().splitlines()[-1])
     quality = r["delta_con_mean"] if energy == "mips" else r["sd"]
@@ -48,14 +50,26 @@ def main():
     ap.add_argument("--bin", required=True)
     ap.add_argument("--energy", default="mips", choices=["mips", "sd"])
     ap.add_argument("--runs", type=int, default=1)
+    ap.add_argument("--slim-ref", help="slim.jsonl: run SLIM for the iterations its converged "
+                    "reference run took on the mesh (the same work, timed here side by side)")
+    ap.add_argument("--slim-max", type=int, default=5000,
+                    help="SLIM iteration cap for meshes without a reference row")
     ap.add_argument("meshes", nargs="+")
     a = ap.parse_args()
+    ref = {}
+    if a.slim_ref:
+        method = "slim_conformal_conv" if a.energy == "mips" else "slim_sd_conv"
+        for line in open(a.slim_ref):
+            r = json.loads(line)
+            if r["method"] == method:
+                ref[r["mesh"]] = r["iterations"]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for m in a.meshes:
+            cap = ref.get(os.path.basename(m), a.slim_max)
             s_runs, o_runs = [], []
             for _ in range(a.runs):
-                s_runs.append(slim(m, a.energy))
+                s_runs.append(slim(m, a.energy, cap))
                 o_runs.append(ours(a.bin, m, a.energy, tmp))
             s_t = statistics.median(r[0] for r in s_runs)
             o_t = statistics.median(r[0] for r in o_runs)
