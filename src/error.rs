@@ -53,3 +53,17 @@ impl Error {
 
 /// Result alias used across the crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The CLI's documented exit codes (README, `foldfree param --help`).
+    #[test]
+    fn exit_codes_follow_the_documented_contract() {
+        assert_eq!(Error::Usage("bad flag".into()).exit_code(), 2);
+        assert_eq!(Error::NotConverged("cap".into()).exit_code(), 3);
+        let solve = crate::linalg::SolveError::Failed { what: "x".into() };
+        assert_eq!(Error::Solve(solve).exit_code(), 1);
+    }
+}

@@ -84,6 +84,29 @@ fn stop_flag_interrupts_and_keeps_a_flip_free_map() {
     assert_eq!(map_energy(&p, &m.faces, &r.uv, Energy::Mips).1, 0);
 }
 
+/// The job keeps an interrupted run's map: `run_param` writes the best flip-free map, says
+/// it did not converge (the CLI's exit 3) and does not hand off (the user asked to stop).
+#[test]
+fn an_interrupted_job_writes_its_best_map_and_reports_not_converged() {
+    let dir = std::env::temp_dir().join(format!("foldfree-interrupt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let out = dir.join("camel.obj");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/camel_open.obj");
+    let mut job = foldfree::param::ParamJob::new(&input, &out);
+    job.backend = foldfree::param::BackendChoice::Cpu;
+    job.admm.stop = Some(Arc::new(AtomicBool::new(true)));
+    let r = foldfree::param::run_param(&job, &mut |_| {})
+        .expect("job")
+        .report;
+    assert_eq!(r.converged, Some(false));
+    assert!(r.written && out.exists());
+    assert_eq!(r.solver_path, "admm");
+    assert_eq!(r.iterations_global, 0);
+    assert_eq!(r.flips, 0);
+    assert!(r.stop.contains("interrupted"), "{}", r.stop);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A flat square from its (distorted) Tutte map: with tight tolerances ADMM finds the isometry
 /// up to similarity for both energies and says it converged.
 #[test]
