@@ -1022,24 +1022,27 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     }
     job.cut_options.stretch_limit = args.stretch_limit;
 
-    let bar = if args.quiet || solver != SolverChoice::Admm {
+    // A spinner with the running solver's state: ADMM's residual checks, the global solver's
+    // iterations (the hand-off, `--solver global`, and every chart of an atlas).
+    let bar = if args.quiet {
         indicatif::ProgressBar::hidden()
     } else {
-        let b = indicatif::ProgressBar::new(job.admm.max_iters as u64);
+        let b = indicatif::ProgressBar::new_spinner();
         b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} ADMM [{bar:30}] {pos}/{len} it {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template("{spinner} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
         );
         b
     };
-    let out = param::run_param(&job, &mut |h| {
-        bar.set_position(h.iteration as u64);
-        bar.set_message(format!(
-            "μ·F {:.0}  primal {:.1e}  dual {:.1e}  E {:.6}",
-            h.mu_rel, h.primal, h.dual, h.energy
-        ));
+    let out = param::run_param(&job, &mut |p| match p {
+        param::Progress::Admm(h) => bar.set_message(format!(
+            "ADMM it {}  μ·F {:.0}  primal {:.1e}  dual {:.1e}  E {:.6}",
+            h.iteration, h.mu_rel, h.primal, h.dual, h.energy
+        )),
+        param::Progress::Global(g) => bar.set_message(format!(
+            "global it {} ({:?})  E {:.6}  |∇E| {:.1e}",
+            g.iteration, g.phase, g.energy, g.grad_norm
+        )),
     });
     bar.finish_and_clear();
     let out = out?;

@@ -9,9 +9,8 @@ use std::time::Instant;
 use crate::init::{initial_map, InitMethod};
 use crate::mesh::{self, Topology, TriMesh};
 use crate::metrics;
-use crate::param::admm::History;
 use crate::param::job::{ParamJob, ParamOutput};
-use crate::param::map::{compute_map, MapOutput, SolverChoice, SolverPath};
+use crate::param::map::{compute_map, MapOutput, Progress, SolverChoice, SolverPath};
 use crate::param::AdmmOptions;
 use crate::report::ParamReport;
 use crate::{Error, Result};
@@ -30,7 +29,7 @@ pub(crate) fn run_atlas(
     ctx: Option<&crate::gpu::Context>,
     t0: Instant,
     t_load: f64,
-    progress: &mut dyn FnMut(&History),
+    progress: &mut dyn FnMut(Progress<'_>),
 ) -> Result<ParamOutput> {
     use crate::param::{cut, pack};
     let t_cut = Instant::now();

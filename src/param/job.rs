@@ -9,9 +9,9 @@ use std::time::Instant;
 use crate::init::InitMethod;
 use crate::mesh::{self, TriMesh};
 use crate::metrics;
-use crate::param::admm::{AdmmOptions, History};
+use crate::param::admm::AdmmOptions;
 use crate::param::atlas::run_atlas;
-use crate::param::map::{compute_map, SolverChoice};
+use crate::param::map::{compute_map, Progress, SolverChoice};
 use crate::param::Energy;
 use crate::report::ParamReport;
 use crate::{Error, Result};
@@ -134,8 +134,9 @@ fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
 }
 
 /// `foldfree param`: load and validate, start map, solve, recover, measure, write the OBJ
-/// (atomically; never over the input). `progress` sees every residual check.
-pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(&History)) -> Result<ParamOutput> {
+/// (atomically; never over the input). `progress` sees every ADMM residual check and every
+/// global-solver iteration.
+pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Result<ParamOutput> {
     let t0 = Instant::now();
     if same_file(&job.input, &job.output) {
         return Err(Error::Usage(format!(

@@ -42,6 +42,15 @@ impl SolverChoice {
     }
 }
 
+/// What a running solve reports: every residual check of ADMM, every iteration of the global
+/// solver (so a host can show progress whichever runs; Ctrl-C reaches both through
+/// [`AdmmOptions::stop`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Progress<'a> {
+    Admm(&'a History),
+    Global(&'a global::GlobalIteration),
+}
+
 /// The solvers that produced a map, in order.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub enum SolverPath {
@@ -163,7 +172,7 @@ pub fn compute_map(
     opts: &AdmmOptions,
     ctx: Option<&crate::gpu::Context>,
     profile: bool,
-    progress: &mut dyn FnMut(&History),
+    progress: &mut dyn FnMut(Progress<'_>),
 ) -> Result<MapOutput> {
     let t1 = Instant::now();
     let frames = mesh::frames::compute(mesh);
@@ -200,12 +209,15 @@ pub fn compute_map(
     let finish_globally = |uv: &mut Vec<[f64; 2]>,
                            folded: bool,
                            path: SolverPath,
-                           out: &mut MapOutput|
+                           out: &mut MapOutput,
+                           progress: &mut dyn FnMut(Progress<'_>)|
      -> Result<()> {
         if folded || !finite(uv) {
             *uv = tutte_map(mesh, topo, area_3d, &finite)?;
         }
-        let g = global::solve(mesh, &frames, uv, &global_opts, &mut |_| {})?;
+        let g = global::solve(mesh, &frames, uv, &global_opts, &mut |it| {
+            progress(Progress::Global(it))
+        })?;
         uv.clone_from(&g.uv);
         out.path = path;
         out.converged = g.converged();
@@ -240,12 +252,24 @@ pub fn compute_map(
             if !result.converged && !result.interrupted {
                 // The hand-off: from ADMM's best flip-free map (the start map or Tutte at
                 // worst), every step of the global solver is flip-free and lowers the energy.
-                finish_globally(&mut uv, result.flips > 0, SolverPath::AdmmGlobal, &mut out)?;
+                finish_globally(
+                    &mut uv,
+                    result.flips > 0,
+                    SolverPath::AdmmGlobal,
+                    &mut out,
+                    progress,
+                )?;
             }
             out.admm = Some(result);
         }
         SolverChoice::Global => {
-            finish_globally(&mut uv, init_flips > 0, SolverPath::Global, &mut out)?;
+            finish_globally(
+                &mut uv,
+                init_flips > 0,
+                SolverPath::Global,
+                &mut out,
+                progress,
+            )?;
         }
     }
     out.seconds_solve = t2.elapsed().as_secs_f64();
@@ -278,11 +302,13 @@ fn run_admm(
     opts: &AdmmOptions,
     ctx: Option<&crate::gpu::Context>,
     profile: bool,
-    progress: &mut dyn FnMut(&History),
+    progress: &mut dyn FnMut(Progress<'_>),
     out: &mut MapOutput,
 ) -> Result<admm::AdmmResult> {
     let mut solve = |exec: &mut dyn admm::driver::Executor| {
-        admm::solve(problem, &mesh.faces, uv, fallback, opts, exec, progress)
+        admm::solve(problem, &mesh.faces, uv, fallback, opts, exec, &mut |h| {
+            progress(Progress::Admm(h))
+        })
     };
     match ctx {
         Some(_) if opts.accel != admm::Accel::None => Err(crate::Error::Usage(
