@@ -79,7 +79,7 @@ fn stop_flag_interrupts_and_keeps_a_flip_free_map() {
         &mut |_| {},
     )
     .expect("solve");
-    assert!(r.interrupted && !r.converged);
+    assert!(r.interrupted() && !r.converged());
     assert_eq!(r.iterations, 0);
     assert_eq!(map_energy(&p, &m.faces, &r.uv, Energy::Mips).1, 0);
 }
@@ -121,7 +121,7 @@ fn flat_grid_converges_to_the_exact_answer_from_tutte() {
         let r = admm::solve(&p, &m.faces, &tutte, None, &o, &mut exec, &mut |_| {}).expect("solve");
         let metrics = foldfree::metrics::evaluate(&m.positions, &m.faces, &r.uv, &t.boundary_loops);
         assert!(
-            r.converged,
+            r.converged(),
             "{energy:?} did not converge in {} iterations",
             r.iterations
         );

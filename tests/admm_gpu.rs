@@ -999,7 +999,12 @@ fn full_solve_agrees(ctx: &Context, energy: Energy) {
         "solve {energy:?} on camel: cpu energy {ec:.9} in {} iterations ({tc:.1} s, converged \
          {}, μ_rel final {}); vulkan energy {eg:.9} in {} iterations ({tg:.1} s, converged {}, \
          μ_rel final {}); relative energy difference {rel:.2e}",
-        rc.iterations, rc.converged, rc.mu_rel_final, rg.iterations, rg.converged, rg.mu_rel_final
+        rc.iterations,
+        rc.converged(),
+        rc.mu_rel_final,
+        rg.iterations,
+        rg.converged(),
+        rg.mu_rel_final
     );
     for (name, r) in [("cpu", &rc), ("vulkan", &rg)] {
         if let Some(h) = r.history.last() {
@@ -1038,4 +1043,44 @@ fn full_solve_mips_on_camel_agrees_with_cpu() {
 #[test]
 fn full_solve_symmetric_dirichlet_on_camel_agrees_with_cpu() {
     with_validated_context(|ctx| full_solve_agrees(ctx, Energy::SymmetricDirichlet));
+}
+
+/// The hand-off on the device path, under validation: Vulkan ADMM stopped short (a 50-iteration
+/// budget) hands its best flip-free map to the global solver, and the result matches the CPU
+/// backend's hand-off (both converge on the same energy test). `compute_map` fails on any
+/// validation message the context collected.
+#[test]
+fn vulkan_admm_hands_off_like_its_cpu_twin() {
+    use foldfree::param::{compute_map, SolverChoice, SolverPath};
+    let (mesh, topo, _) = mesh::load(&data("camel_open.obj"), &mesh::ValidateOptions::default())
+        .expect("test mesh loads");
+    let frames = mesh::frames::compute(&mesh);
+    let mut opts = AdmmOptions::for_energy(Energy::Mips);
+    opts.max_iters = 50;
+    let run = |ctx: Option<&Context>| {
+        let out = compute_map(
+            &mesh,
+            &topo,
+            InitMethod::Lscm,
+            SolverChoice::Admm,
+            &opts,
+            ctx,
+            false,
+            &mut |_| {},
+        )
+        .expect("map");
+        assert_eq!(out.path, SolverPath::AdmmGlobal);
+        assert!(out.converged(), "{}", out.stop_summary());
+        assert_eq!(count_flips(&mesh.faces, &out.uv), 0);
+        let (e, _) =
+            foldfree::param::global::objective_and_gradient(&mesh, &frames, Energy::Mips, &out.uv)
+                .expect("energy");
+        e
+    };
+    let e_cpu = run(None);
+    with_validated_context(|ctx| {
+        let e_gpu = run(Some(ctx));
+        let rel = (e_gpu - e_cpu).abs() / e_cpu;
+        assert!(rel < 1e-3, "vulkan {e_gpu} vs cpu {e_cpu} ({rel:.2e})");
+    });
 }

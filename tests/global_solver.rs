@@ -355,7 +355,7 @@ fn admm_that_stops_short_hands_off_to_the_global_solver() {
         )
         .expect("map");
         assert_eq!(out.path, SolverPath::AdmmGlobal, "{energy:?}");
-        assert!(out.converged, "{energy:?}: {}", out.stop_summary());
+        assert!(out.converged(), "{energy:?}: {}", out.stop_summary());
         let admm = out.admm.as_ref().expect("admm ran");
         assert_eq!(admm.stop, foldfree::param::admm::AdmmStop::MaxIterations);
         let g = out.global.as_ref().expect("global ran");

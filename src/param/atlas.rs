@@ -127,7 +127,7 @@ pub(crate) fn run_atlas(
         seconds_init += map.seconds_init;
         seconds_solve += map.seconds_solve;
         report.init_flips += map.init_flips;
-        converged &= map.converged;
+        converged &= map.converged();
         path = path.combine(map.path);
         // The report's stop line, convergence plot and global history show the largest chart.
         let is_largest = faces.len() > largest;

@@ -207,7 +207,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     };
     if solver != SolverChoice::None {
         report.energy = Some(admm.energy.name().into());
-        report.converged = Some(map.converged);
+        report.converged = Some(map.converged());
     }
     let uv = map.uv;
     report.kernel_times = map.kernel_times;

@@ -108,8 +108,6 @@ pub struct MapOutput {
     /// The global solver's run, when it ran (alone, or after ADMM's hand-off).
     pub global: Option<global::GlobalResult>,
     pub path: SolverPath,
-    /// Whether the last solver that ran met its stop test (true when no solver ran).
-    pub converged: bool,
     /// Per-kernel device times (Vulkan with `profile`).
     pub kernel_times: Option<admm::vulkan::KernelTimes>,
     /// Bytes the kernels move per iteration (Vulkan).
@@ -119,6 +117,16 @@ pub struct MapOutput {
 }
 
 impl MapOutput {
+    /// Whether the last solver that ran met its stop test (true when no solver ran): the
+    /// global solver's when it ran (alone or after the hand-off), else ADMM's.
+    pub fn converged(&self) -> bool {
+        match (&self.global, &self.admm) {
+            (Some(g), _) => g.converged(),
+            (None, Some(a)) => a.converged(),
+            (None, None) => true,
+        }
+    }
+
     /// One line saying why the run stopped, and how far from its stop test when it did not
     /// meet it.
     pub fn stop_summary(&self) -> String {
@@ -144,15 +152,13 @@ fn tutte_map(
     area_3d: f64,
     usable: &dyn Fn(&[[f64; 2]]) -> bool,
 ) -> Result<Vec<[f64; 2]>> {
-    for w in [TutteWeights::MeanValue, TutteWeights::Uniform] {
-        let Ok(mut t) = initial_map(mesh, topo, InitMethod::Tutte(w)) else {
-            continue;
-        };
+    if let Ok(mut t) = initial_map(mesh, topo, InitMethod::Tutte(TutteWeights::MeanValue)) {
         normalize_area(mesh, &mut t, area_3d);
         if crate::init::count_flips(&mesh.faces, &t) == 0 && usable(&t) {
             return Ok(t);
         }
     }
+    // The uniform map whatever `usable` says: the callers' flip checks judge it.
     let mut t = initial_map(mesh, topo, InitMethod::Tutte(TutteWeights::Uniform))?;
     normalize_area(mesh, &mut t, area_3d);
     Ok(t)
@@ -189,7 +195,6 @@ pub fn compute_map(
         admm: None,
         global: None,
         path: SolverPath::None,
-        converged: true,
         kernel_times: None,
         bytes_per_iteration: None,
         seconds_init,
@@ -220,7 +225,6 @@ pub fn compute_map(
         })?;
         uv.clone_from(&g.uv);
         out.path = path;
-        out.converged = g.converged();
         out.global = Some(g);
         Ok(())
     };
@@ -248,8 +252,7 @@ pub fn compute_map(
             )?;
             uv.clone_from(&result.uv);
             out.path = SolverPath::Admm;
-            out.converged = result.converged;
-            if !result.converged && !result.interrupted {
+            if !result.converged() && !result.interrupted() {
                 // The hand-off: from ADMM's best flip-free map (the start map or Tutte at
                 // worst), every step of the global solver is flip-free and lowers the energy.
                 finish_globally(

@@ -30,9 +30,9 @@ const RIDGE: f64 = 1e-10;
 #[derive(Clone, Debug)]
 pub struct Anderson {
     depth: usize,
-    /// Ring buffer of `ΔG_j = G(x_j+1) − G(x_j)`. f64: with f32 differences the combination
-    /// `Σ θ_j ΔG_j` (θ large when the Δf are nearly collinear) lost enough precision to cost
-    /// face.obj SD 2875 instead of 1725 iterations (BENCHMARKS.md).
+    /// Ring buffer of `ΔG_j = G(x_j+1) − G(x_j)`. f64: the combination `Σ θ_j ΔG_j` has large
+    /// θ of both signs when the Δf are nearly collinear, so it cancels, and f32 differences
+    /// lose the digits the extrapolation needs (measured: 1.7× the iterations, BENCHMARKS.md).
     dg: Vec<Vec<f64>>,
     /// Ring buffer of `Δf_j = f_j+1 − f_j`.
     df: Vec<Vec<f64>>,

@@ -4,8 +4,9 @@
 
 use rayon::prelude::*;
 
-/// Elements per partial sum in [`residuals`] (fixed, so the summation order is too).
-const SUM_CHUNK: usize = 4096;
+// Elements per partial sum in `residuals` (fixed, so the summation order is too): the
+// chunking of `crate::linalg::ordered_sum`.
+use crate::linalg::SUM_CHUNK;
 
 use super::anderson::Anderson;
 use super::driver::{Accel, Executor, Residuals};
@@ -357,19 +358,9 @@ pub fn residuals(
         .collect::<Vec<_>>()
         .iter()
         .fold([0.0; 3], |x, y| [x[0] + y[0], x[1] + y[1], x[2] + y[2]]);
-    let energy_sum: f64 = state
-        .a
-        .par_chunks(SUM_CHUNK)
-        .zip(problem.weight.par_chunks(SUM_CHUNK))
-        .map(|(a, w)| {
-            a.iter()
-                .zip(w)
-                .map(|(a, w)| w * energy::value(energy, a))
-                .sum::<f64>()
-        })
-        .collect::<Vec<_>>()
-        .iter()
-        .sum();
+    let energy_sum = crate::linalg::ordered_sum(state.a.len(), |f| {
+        problem.weight[f] * energy::value(energy, &state.a[f])
+    });
     Residuals {
         primal2: slot_sums[0],
         dual2: slot_sums[1],

@@ -81,11 +81,11 @@ pub struct AdmmOptions {
     /// Relative energy change between checks.
     pub tol_energy: f64,
     /// Consecutive checks the energy change must stay under `tol_energy`. One is not enough:
-    /// where the per-face energy sum oscillates (lion_mask and camelhead SD swing by 1e-4–1e-3
-    /// between checks), a single check can land near a turning point by chance and stop a run
-    /// that has not settled. Two (50 iterations) was measured against three: same quality, and
-    /// with three the backends stopped lion_mask SD at different turning points of its slow
-    /// oscillation (3450 vs 4150 iterations), with two both at 2075 (BENCHMARKS.md).
+    /// the per-face energy sum of an ADMM iterate oscillates while the consensus settles, and a
+    /// single sample of an oscillation is small near each turning point by chance; two
+    /// consecutive small samples are the fewest that exclude a lone turning point. With this
+    /// stop test every disk of the corpus converged or handed off with a map within 1 % of
+    /// SLIM's (55/55 MIPS, 54/55 SD; BENCHMARKS.md, "Corpus sweeps").
     pub energy_checks: usize,
     /// Least-squares re-synchronisation period in iterations (0: off).
     pub resync_every: usize,
@@ -140,9 +140,10 @@ impl AdmmOptions {
             newton_iters: 1,
             tol_primal: 1e-4,
             tol_dual: 1e-4,
-            // Per 25-iteration check; with 2 consecutive checks (below). The per-face energy sum
-            // moves with the iterates, so a tolerance far under the residuals' (1e-4) is met only
-            // at a turning point of an oscillation (BENCHMARKS.md, "Stopping test").
+            // Per 25-iteration check, relative (the energy is a mean bounded below by 2 or 4, so
+            // the ratio is a pure number); with 2 consecutive checks. The per-face energy sum
+            // moves with the iterates at the size of the residuals (1e-4), so a tolerance far
+            // under that is met only at a turning point of an oscillation.
             tol_energy: 1e-5,
             energy_checks: 2,
             resync_every: 0,
@@ -157,8 +158,8 @@ impl AdmmOptions {
             aa_depth: 6,
             aa_every: 1,
             aa_start: None,
-            // Off: the gate helps camelhead SD (5400 → 3150 iterations) but costs camel,
-            // lion and face SD more (BENCHMARKS.md, Anderson round 2).
+            // Off: Anderson acceleration is opt-in, and this gate, measured on the shared
+            // disks only, helped one run and slowed three (BENCHMARKS.md, Anderson round 2).
             aa_balance_energy: f64::INFINITY,
             recovery: Recovery::LeastSquares,
         }
@@ -166,11 +167,14 @@ impl AdmmOptions {
 
     /// Checks without a new primal low before μ is raised (the option, or the energy's default).
     ///
-    /// SD from LSCM has a long transient (the energy swings by 1e-2 between checks for the
-    /// first ~1500 iterations) in which the primal residual makes no new low for a while without
-    /// being unstable; raising μ there (8 checks) pinned lion_mask SD at μ·F 8000, in a slow
-    /// limit cycle it never left. With 16 it stays at 1000 and converges (2075 iterations,
-    /// BENCHMARKS.md). MIPS keeps 8: 16 cost camelhead MIPS its convergence.
+    /// Why SD waits twice as long: MIPS is scale-free, so its per-face optimum is local and
+    /// the consensus settles with local corrections; SD prescribes area, so from a conformal
+    /// (LSCM) start area has to move across the whole mesh, a transient in which the primal
+    /// residual makes no new low for a while without being unstable — raising μ there locks
+    /// the iteration into a slow limit cycle at a needlessly stiff penalty. The window is in
+    /// checks (iteration counts), independent of mesh size and units. Measured over the whole
+    /// disk corpus with these values (BENCHMARKS.md, "Corpus sweeps"): 61/61 runs per energy
+    /// end with a flip-free map; not varied over the corpus.
     pub fn stall_checks(&self) -> usize {
         self.stall_checks.unwrap_or(match self.energy {
             Energy::Mips => 8,
@@ -180,11 +184,14 @@ impl AdmmOptions {
 
     /// Bound of residual balancing (the option, or the energy's default).
     ///
-    /// On the f32 device the primal residual has a floor that grows as μ shrinks (the
-    /// multipliers grow as 1/μ and `A − Λ/μ` cancels): ≈ 2.5e-5 at μ·F 6.25 on camel_open MIPS,
-    /// the balancing threshold. Below that the device stopped balancing and the CPU went on to
-    /// 1.56, 3075 against 5075 iterations; bounded at 100/16 both take 3050–3075. SD balances
-    /// down to 1000/64 on camel on both backends alike.
+    /// Why a bound at all: on an f32 device the primal residual has a rounding floor that
+    /// grows as μ shrinks (the multipliers grow as 1/μ and `A − Λ/μ` cancels), and balancing
+    /// needs the residual under a quarter of its tolerance; without a bound the two backends
+    /// take different paths once the device's floor reaches that threshold. The bounds stop
+    /// balancing at μ·F 6.25 (MIPS, start 100) and 15.6 (SD, start 1000), where the measured f32
+    /// floor is at most that threshold (BENCHMARKS.md, "Stopping test and μ adaptation"); the
+    /// CPU/Vulkan agreement test (tests/admm_gpu.rs) checks that the backends still follow one
+    /// path.
     pub fn mu_shrink_max(&self) -> f64 {
         self.mu_shrink_max.unwrap_or(match self.energy {
             Energy::Mips => 16.0,
@@ -193,8 +200,10 @@ impl AdmmOptions {
     }
 
     /// Plain iterations before Anderson acceleration starts (the option, or the energy's
-    /// default): plain ADMM from LSCM converges in 75–275 iterations on most MIPS runs; on SD
-    /// runs starting late cost lion_mask 3225 instead of 1475 (BENCHMARKS.md).
+    /// default). MIPS from LSCM starts next to its optimum (LSCM minimises the conformal
+    /// energy without the flip constraint), so most runs converge within a few hundred plain
+    /// iterations and pay nothing for acceleration; SD starts far from it (area has to move),
+    /// so acceleration pays from the first iteration.
     pub fn aa_start(&self) -> usize {
         self.aa_start.unwrap_or(match self.energy {
             Energy::Mips => 100,
@@ -261,17 +270,12 @@ pub struct AdmmResult {
     /// #V per-vertex UVs (the best flip-free map seen; the start map if none was better).
     pub uv: Vec<[f64; 2]>,
     pub iterations: usize,
-    /// Residuals and energy change under tolerance, and the recovered map flip-free.
-    pub converged: bool,
-    /// Stopped by the caller's flag.
-    pub interrupted: bool,
+    /// Why the run ended ([`AdmmResult::converged`], [`AdmmResult::interrupted`]).
     pub stop: AdmmStop,
     pub mu_rel_final: f64,
     pub history: Vec<History>,
     /// Flips of the map in `uv` (0 unless even the start map was flipped).
     pub flips: usize,
-    /// Σ w E of the map in `uv` (+∞ when it flips).
-    pub energy: f64,
     pub backend: &'static str,
     pub device: String,
     /// The tolerances the stop test used (for [`AdmmResult::stop_summary`]).
@@ -280,6 +284,16 @@ pub struct AdmmResult {
 }
 
 impl AdmmResult {
+    /// Residuals and energy change under tolerance, and the recovered map flip-free.
+    pub fn converged(&self) -> bool {
+        self.stop == AdmmStop::Converged
+    }
+
+    /// Stopped by the caller's flag.
+    pub fn interrupted(&self) -> bool {
+        self.stop == AdmmStop::Interrupted
+    }
+
     /// Why ADMM stopped, with its last residuals against their tolerances.
     pub fn stop_summary(&self) -> String {
         let last = self.history.last();
@@ -552,8 +566,9 @@ pub fn solve(
         // the primal residual is above tolerance and has made no new low for a while.
         if can_raise && primal > opts.tol_primal && checks_since_best >= opts.stall_checks() {
             // Hysteresis: μ at which the iteration stalled is below the stability threshold;
-            // residual balancing never goes back under it (lion_mask SD ping-ponged between
-            // halving and raising until μ reached its bound and the iteration diverged).
+            // residual balancing never goes back under it (otherwise the two rules alternate,
+            // halving on a tight consensus and raising on the stall, until μ reaches its bound;
+            // tests/admm_driver.rs scripts that history).
             mu_floor = mu_floor.max(2.0 * mu_rel);
             mu_rel *= 2.0;
             best_primal = primal;
@@ -570,12 +585,11 @@ pub fn solve(
             // already tight (a quarter of its tolerance) while the maps still move (dual residual
             // or energy change over tolerance), so a smaller μ lets the energy move. An earlier
             // rule, "dual > 10 × primal", hinged on how small the primal residual gets, and on f32
-            // devices that has a floor (≈ 5e-6 relative on camel_open SD): the Vulkan run stopped
-            // balancing at μ·F 125 while the CPU run went on to 15.6, so the two backends took
-            // 10 000 (cap) and 8750 iterations. With this rule both converge, in 6350 and 6600.
-            // While accelerating, the extrapolated consensus can tighten long before the energy
-            // has settled (camelhead SD: μ halved three times, each change dropping the Anderson
-            // history); `aa_balance_energy` can make balancing wait for the energy change too.
+            // devices that has a rounding floor, so the two backends balanced to different μ and
+            // followed different paths; a threshold relative to the tolerance does not depend on
+            // it. While accelerating, the extrapolated consensus can tighten long before the
+            // energy has settled (each μ change drops the Anderson history);
+            // `aa_balance_energy` can make balancing wait for the energy change too.
             mu_rel /= 2.0;
             best_primal = primal;
             checks_since_best = 0;
@@ -591,17 +605,13 @@ pub fn solve(
         recover(&st.a, &mut uv)?;
         best.offer(problem, faces, &uv, opts.energy);
     }
-    let converged = stop == AdmmStop::Converged;
     Ok(AdmmResult {
         uv: best.uv,
         iterations: it,
-        converged,
-        interrupted: stop == AdmmStop::Interrupted,
         stop,
         mu_rel_final: mu_rel,
         history,
         flips: best.flips,
-        energy: best.energy,
         backend: exec.backend(),
         device: exec.device(),
         tol_primal: opts.tol_primal,
