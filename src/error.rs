@@ -28,6 +28,10 @@ pub enum Error {
     /// Volumetric maps: bad tet mesh / constraints (exit 2) or a failed solve (exit 1).
     #[error(transparent)]
     Vol(#[from] crate::vol::VolError),
+    /// An input cannot be read, or an output path is unusable or names an input (exit 2); or
+    /// writing the outputs failed at the end (exit 1, nothing left behind).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The request itself is wrong (bad option combination, refusing to overwrite the input).
     #[error("{0}")]
     Usage(String),
@@ -47,6 +51,7 @@ impl Error {
             Error::NotConverged(_) => 3,
             Error::Approx(e) => e.exit_code(),
             Error::Vol(e) => e.exit_code(),
+            Error::File(e) => e.exit_code(),
         }
     }
 }

@@ -9,6 +9,7 @@ pub mod approx;
 pub mod bench;
 pub mod embed;
 pub mod error;
+pub mod files;
 pub mod gpu;
 pub mod init;
 pub mod linalg;

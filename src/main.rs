@@ -14,6 +14,7 @@ use foldfree::mesh;
 use foldfree::param::admm::AdmmOptions;
 use foldfree::param::Energy;
 
+use foldfree::files::{Outputs, DEFAULT_MAX_ELEMENTS};
 use foldfree::param::{self, BackendChoice, ParamJob, SolverChoice};
 
 #[derive(Parser)]
@@ -35,6 +36,9 @@ enum Command {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+        /// Refuse meshes with more faces (and files larger than such a mesh's text).
+        #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS, value_parser = clap::value_parser!(usize))]
+        max_faces: usize,
     },
     /// UV-parameterize a mesh without flipped triangles (a disk, or any manifold mesh cut into
     /// charts).
@@ -125,6 +129,9 @@ struct VolmapArgs {
     /// sliding on the sphere) and run the paper's guided deformation + penalty rounds only.
     #[arg(long)]
     no_untangle: bool,
+    /// Refuse meshes with more tets (and files larger than such a mesh's text).
+    #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
+    max_tets: usize,
     /// No progress display.
     #[arg(short, long)]
     quiet: bool,
@@ -143,6 +150,9 @@ struct VolConstraintArgs {
     /// Fraction of the length held at each end (near end fixed, far end twisted).
     #[arg(long, default_value_t = 0.15)]
     fraction: f64,
+    /// Refuse meshes with more tets (and files larger than such a mesh's text).
+    #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
+    max_tets: usize,
 }
 
 #[derive(clap::Args)]
@@ -162,6 +172,9 @@ struct VolcheckArgs {
     /// maps; exit 1 above 1e-9).
     #[arg(long)]
     sphere: bool,
+    /// Refuse meshes with more tets (and files larger than such a mesh's text).
+    #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
+    max_tets: usize,
 }
 
 fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
@@ -222,6 +235,7 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         report: a.report,
         write_constraints: a.write_constraints,
         quiet: a.quiet,
+        max_tets: a.max_tets,
         options,
     };
     let r = run_volmap_job(&job)?;
@@ -239,9 +253,7 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         if r.run.snapped { " (snapped)" } else { "" },
         r.run.seconds
     );
-    if q.rho >= 1e-6 {
-        eprintln!("  warning: position constraints NOT met (ρ ≥ θ = 1e-6); the map is fold-free");
-    }
+    let unmet = q.rho >= job.options.theta;
     if let Some(s) = &r.sphere_sliding {
         eprintln!(
             "  {:<20} {:>4} it {:>6} ε   {:>7.2} s  inverted {} → {} (boundary sliding on the sphere)",
@@ -260,17 +272,30 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
             p.name, p.iterations, p.cg_iterations, p.seconds, p.energy, p.rho
         );
     }
+    if unmet {
+        // Written (fold-free) but not the requested map: exit 3, as for a parameterization
+        // whose stop test was not met.
+        return Err(foldfree::Error::NotConverged(format!(
+            "{}: position constraints NOT met (ρ {:.3e} ≥ θ = {:.0e}); the fold-free map was written",
+            job.output.display(),
+            q.rho,
+            job.options.theta
+        )));
+    }
     Ok(())
 }
 
 fn run_volmap_constraints(a: VolConstraintArgs) -> foldfree::Result<()> {
     use foldfree::vol::constraints::{constraints_text, twist_constraints};
-    let rest = foldfree::vol::job::read_rest(&a.rest)?;
+    let mut outputs = Outputs::new();
+    foldfree::vol::job::tet_input(&mut outputs, &a.rest);
+    outputs.output(&a.output, "constraints", &[])?;
     if !(0.0..0.5).contains(&a.fraction) || !a.twist.is_finite() {
         return Err(foldfree::Error::Usage(
             "--fraction must be in [0, 0.5) and --twist finite".into(),
         ));
     }
+    let rest = foldfree::vol::job::read_rest(&a.rest, a.max_tets)?;
     let c = twist_constraints(&rest, a.twist, a.fraction);
     let header = format!(
         "foldfree volmap-constraints {} --twist {} --fraction {}\nvertex_index x y z (0-based)",
@@ -278,12 +303,8 @@ fn run_volmap_constraints(a: VolConstraintArgs) -> foldfree::Result<()> {
         a.twist,
         a.fraction
     );
-    foldfree::mesh::write_atomic(&a.output, constraints_text(&c, &header).as_bytes()).map_err(
-        |source| foldfree::Error::Io {
-            path: a.output.clone(),
-            source,
-        },
-    )?;
+    outputs.set(&a.output, constraints_text(&c, &header).into_bytes());
+    outputs.commit()?;
     eprintln!(
         "wrote {} ({} constrained vertices)",
         a.output.display(),
@@ -294,7 +315,7 @@ fn run_volmap_constraints(a: VolConstraintArgs) -> foldfree::Result<()> {
 
 fn run_volcheck(a: VolcheckArgs) -> foldfree::Result<()> {
     use foldfree::vol::job::{constraints_for, read_map, read_rest, ConstraintSource};
-    let rest = read_rest(&a.rest)?;
+    let rest = read_rest(&a.rest, a.max_tets)?;
     let x = read_map(&rest, &a.rest, &a.map)?;
     let targets = match (&a.init, &a.constraints) {
         (Some(p), _) => {
@@ -476,7 +497,7 @@ struct ParamArgs {
     cut: CutArg,
     /// Refuse meshes with more faces than this (and files far larger than such a mesh needs)
     /// before any heavy work; 0 = no limit.
-    #[arg(long, default_value_t = 20_000_000)]
+    #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
     max_faces: usize,
     /// Gap between packed charts and to the border, as a fraction of the unit square's side.
     #[arg(long, default_value_t = 0.005)]
@@ -551,6 +572,9 @@ struct ApproxArgs {
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Refuse meshes with more faces (and files larger than such a mesh's text).
+    #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
+    max_faces: usize,
     /// No progress display.
     #[arg(short, long)]
     quiet: bool,
@@ -558,21 +582,25 @@ struct ApproxArgs {
 
 fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     use foldfree::approx::{self, ApproxOptions, Stage};
-    if args.output == args.input || args.polygons.as_ref() == Some(&args.input) {
-        return Err(foldfree::Error::Usage(
-            "refusing to overwrite the input".into(),
-        ));
+    let mut outputs = Outputs::new();
+    outputs.input(&args.input);
+    outputs.output(&args.output, "planar mesh", &["obj"])?;
+    if let Some(p) = &args.polygons {
+        outputs.output(p, "polygons", &["obj"])?;
     }
-    if args.k == 0 || !(args.angle > 0.0 && args.angle <= 180.0) {
-        return Err(foldfree::Error::Usage(
-            "-k must be ≥ 1 and --angle in (0, 180]".into(),
-        ));
+    if let Some(p) = &args.report {
+        outputs.output(p, "report", &["json"])?;
     }
-    let (m, topo, _) = mesh::load(&args.input, &mesh::ValidateOptions::default())?;
     let mut opts = ApproxOptions::new(args.k);
     opts.seed = args.seed;
     opts.restarts = args.restarts;
     opts.angle_deg = args.angle;
+    opts.validate()?;
+    let validate = mesh::ValidateOptions {
+        max_faces: Some(args.max_faces),
+        ..Default::default()
+    };
+    let (m, topo, _) = mesh::load(&args.input, &validate)?;
     let bar = if args.quiet {
         indicatif::ProgressBar::hidden()
     } else {
@@ -593,20 +621,20 @@ fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     });
     bar.finish_and_clear();
     let out = out?;
-    let write = |path: &PathBuf, text: String| {
-        mesh::write_atomic(path, text.as_bytes()).map_err(|source| foldfree::Error::Io {
-            path: path.clone(),
-            source,
-        })
-    };
-    write(&args.output, approx::mesh_obj(&out.positions, &m.faces))?;
-    if let Some(p) = &args.polygons {
-        write(p, out.polygons.to_obj(args.triangulate))?;
-    }
     let r = &out.report;
-    if let Some(p) = &args.report {
-        write(p, serde_json::to_string_pretty(r).unwrap_or_default())?;
+    // The contract of the output: every face keeps its orientation and area.
+    out.check_fold_free()?;
+    outputs.set(
+        &args.output,
+        approx::mesh_obj(&out.positions, &m.faces).into_bytes(),
+    );
+    if let Some(p) = &args.polygons {
+        outputs.set(p, out.polygons.to_obj(args.triangulate).into_bytes());
     }
+    if let Some(p) = &args.report {
+        outputs.set(p, serde_json::to_vec_pretty(r).unwrap_or_default());
+    }
+    outputs.commit()?;
     eprintln!(
         "foldfree approx: {} faces → {} regions (K = {}), {} polygons, {} corners, {:.2} s ({} run{}, seed {} kept)",
         r.faces,
@@ -664,6 +692,9 @@ struct RenderArgs {
     /// uniform patches; or a tet mesh's boundary surface, `.mesh` / `.node`).
     #[arg(long, value_enum, default_value = "checker")]
     shade: ShadeArg,
+    /// Refuse meshes with more faces or tets (and files larger than such a mesh's text).
+    #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
+    max_elements: usize,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -677,19 +708,19 @@ type Corners = (Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>);
 
 /// The corners of a triangle surface with zero UVs, for `--shade normals`: an OBJ, or the
 /// boundary surface of a tet mesh (`.mesh`, `.node`/`.ele`; e.g. a `volmap` output).
-fn surface_corners(path: &std::path::Path) -> foldfree::Result<Corners> {
+fn surface_corners(path: &std::path::Path, max_elements: usize) -> foldfree::Result<Corners> {
     let is_tet = matches!(
         path.extension().and_then(|e| e.to_str()),
         Some("mesh" | "node" | "ele")
     );
     let m = if is_tet {
-        let t = foldfree::vol::tetgen::read_any(path)?;
+        let t = foldfree::vol::tetgen::read_any_with_limit(path, max_elements)?;
         mesh::TriMesh {
             faces: t.boundary_faces(),
             positions: t.positions,
         }
     } else {
-        mesh::read_obj(path)?
+        mesh::obj::read_obj_with_info(path, max_elements)?.0
     };
     let mut positions = Vec::with_capacity(3 * m.faces.len());
     for f in &m.faces {
@@ -705,15 +736,21 @@ fn surface_corners(path: &std::path::Path) -> foldfree::Result<Corners> {
 fn run_render(args: RenderArgs) -> foldfree::Result<()> {
     use foldfree::gpu::{render_checker, Context, ContextDesc, RenderDesc};
     use foldfree::viz::render::{encode_rgba_png, read_obj_with_uv};
-    if args.output == args.input {
-        return Err(foldfree::Error::Usage(
-            "refusing to overwrite the input with the picture".into(),
-        ));
-    }
+    let mut outputs = Outputs::new();
+    foldfree::vol::job::tet_input(&mut outputs, &args.input);
+    outputs.output(&args.output, "picture", &["png"])?;
     let (positions, uvs, indices) = match args.shade {
-        ShadeArg::Checker => read_obj_with_uv(&args.input)?.corners(),
-        ShadeArg::Normals => surface_corners(&args.input)?,
+        ShadeArg::Checker => read_obj_with_uv(&args.input, args.max_elements)?.corners(),
+        ShadeArg::Normals => surface_corners(&args.input, args.max_elements)?,
     };
+    if indices.len() / 3 > args.max_elements {
+        return Err(foldfree::Error::Usage(format!(
+            "{}: {} triangles, more than --max-elements {}",
+            args.input.display(),
+            indices.len() / 3,
+            args.max_elements
+        )));
+    }
     let view_dir = match args.view.as_slice() {
         &[x, y, z] if [x, y, z].iter().all(|c| c.is_finite()) && x * x + y * y + z * z > 0.0 => {
             [x, y, z]
@@ -755,7 +792,8 @@ fn run_render(args: RenderArgs) -> foldfree::Result<()> {
             path: args.output.clone(),
             source,
         })?;
-    foldfree::viz::write_file(&args.output, &png)?;
+    outputs.set(&args.output, png);
+    outputs.commit()?;
     println!(
         "wrote {} ({}x{}, {} triangles, {})",
         args.output.display(),
@@ -770,8 +808,12 @@ fn run_render(args: RenderArgs) -> foldfree::Result<()> {
     Ok(())
 }
 
-fn run_stats(input: PathBuf, json: bool) -> foldfree::Result<()> {
-    let (m, topo, report) = mesh::load(&input, &mesh::ValidateOptions::default())?;
+fn run_stats(input: PathBuf, json: bool, max_faces: usize) -> foldfree::Result<()> {
+    let opts = mesh::ValidateOptions {
+        max_faces: Some(max_faces),
+        ..Default::default()
+    };
+    let (m, topo, report) = mesh::load(&input, &opts)?;
     let genus = topo.genus();
     if json {
         let v = serde_json::json!({
@@ -974,6 +1016,15 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     let admm_accel_cpu_only = admm.accel != foldfree::param::admm::Accel::None;
     admm.stop = Some(stop);
     let mut job = ParamJob::new(&args.input, &args.output);
+    job.report = args.report.clone();
+    job.images = foldfree::viz::ImageOutputs {
+        layout_svg: args.svg.clone(),
+        layout_png: args.png.clone(),
+        png_size: args.png_size,
+        plot_svg: args.plot.clone(),
+        plot_png: args.plot_png.clone(),
+        ..Default::default()
+    };
     job.init = init;
     job.solver = solver;
     // ADMM-only options say the user wants ADMM on the charts too.
@@ -1047,18 +1098,6 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     bar.finish_and_clear();
     let out = out?;
     let r = &out.report;
-    if let Some(path) = &args.report {
-        param::write_report(path, r)?;
-    }
-    let images = foldfree::viz::ImageOutputs {
-        layout_svg: args.svg.clone(),
-        layout_png: args.png.clone(),
-        png_size: args.png_size,
-        plot_svg: args.plot.clone(),
-        plot_png: args.plot_png.clone(),
-        ..Default::default()
-    };
-    foldfree::viz::write_images(&out.mesh, &out.uv, &r.history, &images)?;
     eprintln!(
         "foldfree: {} → {}: {} faces, backend {} ({}), init {}, solver {}{}",
         r.input,
@@ -1137,7 +1176,11 @@ Exit codes:
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Stats { input, json } => run_stats(input, json),
+        Command::Stats {
+            input,
+            json,
+            max_faces,
+        } => run_stats(input, json, max_faces),
         Command::Param(args) => run_param(*args),
         Command::Devices => run_devices(),
         Command::Render(args) => run_render(args),

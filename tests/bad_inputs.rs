@@ -404,7 +404,13 @@ fn run_cmd(cmd: Cmd, input: &Path, out: &Path) -> Result<Run, String> {
 /// Runs `cmd` on `file` (output, for `param`, in `dir`) and lists every violated expectation.
 fn check(cmd: Cmd, file: &str, expect: Expect, dir: &TempDir) -> Vec<String> {
     let input = bad_dir().join(file);
-    let out = dir.join(&format!("{file}.out.obj"));
+    // The output's extension is checked before the input is read: a tet map is a `.mesh`.
+    let ext = if file.ends_with(".mesh") {
+        "mesh"
+    } else {
+        "obj"
+    };
+    let out = dir.join(&format!("{file}.out.{ext}"));
     let run = match run_cmd(cmd, &input, &out) {
         Ok(run) => run,
         Err(e) => return vec![e],

@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use foldfree::mesh::obj::{
-    parse_obj, parse_obj_with_info, read_obj, read_obj_with_info, write_atomic,
-    write_obj_with_corner_uv, write_obj_with_uv,
+    obj_text_with_corner_uv, obj_text_with_uv, parse_obj, parse_obj_with_info, read_obj,
+    read_obj_with_info,
 };
 use foldfree::mesh::{frames, MeshError, Topology, TriMesh, NO_FACE};
 
@@ -682,7 +682,7 @@ fn obj_non_finite_coordinates_are_parsed_for_validation() {
 
 #[test]
 fn read_obj_with_info_on_a_data_file() {
-    let (mesh, info) = read_obj_with_info(&data("square_grid_10x10.obj")).unwrap();
+    let (mesh, info) = read_obj_with_info(&data("square_grid_10x10.obj"), 1000).unwrap();
     assert_eq!(mesh.faces.len(), 200);
     assert_eq!(info.source_face_count, 200);
     assert_eq!(info.polygons_triangulated, 0);
@@ -716,7 +716,7 @@ fn write_obj_with_uv_round_trips_exactly() {
         [7.0, 8.0],
     ];
     std::fs::write(&path, "old contents").unwrap();
-    write_obj_with_uv(&path, &mesh, &uv).unwrap();
+    std::fs::write(&path, obj_text_with_uv(&mesh, &uv).unwrap()).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.starts_with("# written by foldfree\n"));
     let back = read_obj(&path).unwrap();
@@ -754,36 +754,44 @@ fn write_obj_with_corner_uv_writes_per_corner_indices() {
         [3.0, 3.0],
     ];
     let corner = vec![[0, 1, 2], [4, 5, 3]];
-    write_obj_with_corner_uv(&path, &mesh, &uv, &corner).unwrap();
+    std::fs::write(&path, obj_text_with_corner_uv(&mesh, &uv, &corner).unwrap()).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     assert_eq!(vt_lines(&text).len(), 6);
     assert!(text.ends_with("f 1/1 2/2 3/3\nf 1/5 3/6 4/4\n"), "{text}");
     assert_eq!(read_obj(&path).unwrap(), mesh);
-    // Index past the uv list: refused, nothing written.
-    let bad = dir.join("bad.obj");
-    let err = write_obj_with_corner_uv(&bad, &mesh, &uv, &[[0, 1, 2], [0, 1, 6]]).unwrap_err();
+    // Index past the uv list: refused.
+    let err = obj_text_with_corner_uv(&mesh, &uv, &[[0, 1, 2], [0, 1, 6]]).unwrap_err();
     assert_eq!(err.kind(), std::io::ErrorKind::InvalidInput);
-    assert!(!bad.exists());
 }
 
 #[test]
-fn write_obj_with_uv_refuses_wrong_uv_count() {
-    let dir = scratch("write_bad_uv");
-    let path = dir.join("out.obj");
+fn obj_text_refuses_wrong_uv_count_and_non_finite_numbers() {
     let mesh = read_obj(&data("two_triangles.obj")).unwrap();
-    let err = write_obj_with_uv(&path, &mesh, &[[0.0, 0.0]]).unwrap_err();
+    let err = obj_text_with_uv(&mesh, &[[0.0, 0.0]]).unwrap_err();
     assert_eq!(err.kind(), std::io::ErrorKind::InvalidInput);
-    assert!(!path.exists());
+    let mut uv = vec![[0.0, 0.0]; mesh.positions.len()];
+    uv[1][0] = f64::NAN;
+    assert!(
+        obj_text_with_uv(&mesh, &uv).is_err(),
+        "nothing non-finite is written"
+    );
 }
 
 #[test]
-fn write_atomic_replaces_and_reports_missing_directories() {
+fn outputs_replace_existing_files_and_report_missing_directories() {
     let dir = scratch("atomic");
     let path = dir.join("report.json");
-    write_atomic(&path, b"first").unwrap();
-    write_atomic(&path, b"second").unwrap();
+    for text in [&b"first"[..], b"second"] {
+        let mut o = foldfree::files::Outputs::new();
+        o.output(&path, "report", &["json"]).unwrap();
+        o.set(&path, text.to_vec());
+        o.commit().unwrap();
+    }
     assert_eq!(std::fs::read(&path).unwrap(), b"second");
-    assert!(write_atomic(&dir.join("no/such/dir/x.json"), b"x").is_err());
+    let mut o = foldfree::files::Outputs::new();
+    assert!(o
+        .output(&dir.join("no/such/dir/x.json"), "report", &["json"])
+        .is_err());
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
 }
 

@@ -313,9 +313,6 @@ fn render_normals_of_an_approximation() {
         approx.to_str().expect("utf-8 path"),
         "--report",
         report.to_str().expect("utf-8 path"),
-        // One run: this test is about the picture, not the folds.
-        "--restarts",
-        "0",
     ]);
     check_ok(&out, "foldfree approx");
     let regions = serde_json::from_slice::<serde_json::Value>(&fs::read(&report).expect("report"))

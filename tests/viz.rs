@@ -213,8 +213,10 @@ fn camel_pictures() {
     check_pictures("camel_open", &["--max-iters", "400"], 1024);
 }
 
+/// A picture in a missing folder is found before any work (exit 2), and the map is not written
+/// either: a run leaves all its outputs or none.
 #[test]
-fn unwritable_picture_is_an_io_error() {
+fn unwritable_picture_is_refused_before_the_run_and_nothing_is_written() {
     let dir = TempDir::new("unwritable");
     let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
         .arg("param")
@@ -225,9 +227,10 @@ fn unwritable_picture_is_an_io_error() {
         .arg(dir.join("no-such-dir/layout.png"))
         .output()
         .expect("run foldfree");
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("layout.png"), "error names the file: {err}");
+    assert!(!dir.join("out.obj").exists(), "the map was written alone");
 }
 
 /// A unit square as two triangles; `mirrored` folds the second triangle over the diagonal.

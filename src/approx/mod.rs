@@ -62,6 +62,9 @@ pub enum ApproxError {
     BadInput(String),
     #[error("approx: {0}")]
     Solve(#[from] SolveError),
+    /// The result folds: it breaks the output's contract and is not written.
+    #[error("approx: {0}")]
+    Folded(String),
 }
 
 impl ApproxError {
@@ -69,7 +72,7 @@ impl ApproxError {
     pub fn exit_code(&self) -> i32 {
         match self {
             ApproxError::Mesh(_) | ApproxError::BadInput(_) => 2,
-            ApproxError::Solve(_) => 1,
+            ApproxError::Solve(_) | ApproxError::Folded(_) => 1,
         }
     }
 }
@@ -145,6 +148,28 @@ pub struct ApproxOptions {
 }
 
 impl ApproxOptions {
+    /// Checks the user-facing settings against their ranges (usage errors, exit 2): at least
+    /// one region, an angle in (0°, 180°], and at most 100 restarts (each is a whole run; a
+    /// seed that 100 others could not beat is not found by the next million).
+    pub fn validate(&self) -> Result<(), ApproxError> {
+        if self.k == 0 {
+            return Err(ApproxError::BadInput("-k must be at least 1".into()));
+        }
+        if !(self.angle_deg.is_finite() && self.angle_deg > 0.0 && self.angle_deg <= 180.0) {
+            return Err(ApproxError::BadInput(format!(
+                "--angle {} is outside (0, 180]",
+                self.angle_deg
+            )));
+        }
+        if self.restarts > 100 {
+            return Err(ApproxError::BadInput(format!(
+                "--restarts {} is outside [0, 100]",
+                self.restarts
+            )));
+        }
+        Ok(())
+    }
+
     pub fn new(k: usize) -> ApproxOptions {
         ApproxOptions {
             k,
@@ -316,6 +341,22 @@ pub struct ApproxOutput {
     pub report: ApproxReport,
 }
 
+impl ApproxOutput {
+    /// The output's contract: no face flipped against its region's plane and none degenerate.
+    /// A result that breaks it is not written (exit 1), with the counts and what to try.
+    pub fn check_fold_free(&self) -> Result<(), ApproxError> {
+        let r = &self.report;
+        if r.flipped_faces + r.degenerate_faces == 0 {
+            return Ok(());
+        }
+        Err(ApproxError::Folded(format!(
+            "the best of {} run(s) at K = {} has {} flipped and {} degenerate face(s); nothing \
+             was written (a larger K, another --seed or more --restarts may avoid them)",
+            r.runs, r.k_requested, r.flipped_faces, r.degenerate_faces
+        )))
+    }
+}
+
 /// Runs the whole pipeline on a validated mesh (see [`crate::mesh::load`]), restarting with
 /// other seeds while folds are left (see `ApproxOptions::restarts`). `progress` is told when
 /// each stage starts.
@@ -327,6 +368,48 @@ pub struct ApproxOutput {
 /// Each restart costs a whole run; runs that fold only a little are cheap (the expensive
 /// repairs are skipped where hundreds of faces fold).
 pub fn approximate(
+    mesh: &TriMesh,
+    topo: &Topology,
+    opts: &ApproxOptions,
+    progress: &mut dyn FnMut(Stage),
+) -> Result<ApproxOutput, ApproxError> {
+    opts.validate()?;
+    // Work at unit scale (exactly: a power of two), report and return in the file's units.
+    let scale = crate::mesh::Scale::fit(
+        mesh.faces
+            .iter()
+            .flatten()
+            .map(|&v| &mesh.positions[v as usize]),
+    );
+    let normalized = TriMesh {
+        positions: mesh.positions.iter().map(|&p| scale.apply(p)).collect(),
+        faces: mesh.faces.clone(),
+    };
+    let mut best = best_run(&normalized, topo, opts, progress)?;
+    for p in best
+        .positions
+        .iter_mut()
+        .chain(best.polygons.positions.iter_mut())
+    {
+        *p = scale.invert(*p);
+    }
+    for pl in best.planes.iter_mut().flatten() {
+        pl.d = scale.length(pl.d);
+    }
+    let r = &mut best.report;
+    for x in [
+        &mut r.bbox_diagonal,
+        &mut r.mean_input_distance,
+        &mut r.max_input_distance,
+        &mut r.max_planarity_deviation,
+    ] {
+        *x = scale.length(*x);
+    }
+    Ok(best)
+}
+
+/// [`approximate`] at unit scale: the restarts.
+fn best_run(
     mesh: &TriMesh,
     topo: &Topology,
     opts: &ApproxOptions,

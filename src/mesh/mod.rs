@@ -5,12 +5,14 @@
 pub mod error;
 pub mod frames;
 pub mod obj;
+pub mod scale;
 pub mod topology;
 pub mod validate;
 
 pub use error::MeshError;
 pub use frames::FaceFrames;
-pub use obj::{read_obj, read_obj_with_info, write_atomic, write_obj_with_uv, ObjInfo};
+pub use obj::{obj_text_with_corner_uv, obj_text_with_uv, read_obj, read_obj_with_info, ObjInfo};
+pub use scale::Scale;
 pub use topology::Topology;
 pub use validate::{load, ValidateOptions, ValidationReport};
 

@@ -5,13 +5,10 @@
 //! [`TriMesh`] is always the `i`-th `v` record of the file, unreferenced vertices included, and
 //! faces come in file order. Only `v` and `f` records carry meaning; every other record is skipped.
 //!
-//! Writers are atomic (temporary file in the target directory, fsync, rename), so an interrupted
-//! run never leaves a truncated OUT.obj behind.
+//! Writers produce text; [`crate::files::Outputs`] commits it with the run's other outputs.
 
-use std::fs;
-use std::io::{self, Write};
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::io;
+use std::path::Path;
 
 use super::{MeshError, TriMesh};
 
@@ -27,13 +24,16 @@ pub struct ObjInfo {
     pub source_face_count: usize,
 }
 
-/// Reads an OBJ file into a triangle mesh, keeping vertex order, face order and unused vertices.
+/// Reads an OBJ file into a triangle mesh, keeping vertex order, face order and unused vertices
+/// (at most [`crate::files::DEFAULT_MAX_ELEMENTS`] faces' worth of bytes).
 pub fn read_obj(path: &Path) -> Result<TriMesh, MeshError> {
-    read_obj_with_info(path).map(|(mesh, _)| mesh)
+    read_obj_with_info(path, crate::files::DEFAULT_MAX_ELEMENTS).map(|(mesh, _)| mesh)
 }
 
-/// [`read_obj`] plus what was triangulated or skipped.
-pub fn read_obj_with_info(path: &Path) -> Result<(TriMesh, ObjInfo), MeshError> {
+/// [`read_obj`] plus what was triangulated or skipped, for a file of at most `max_faces`
+/// faces' worth of bytes ([`crate::files::BYTES_PER_ELEMENT`] each; the face count itself is
+/// checked by validation).
+pub fn read_obj_with_info(path: &Path, max_faces: usize) -> Result<(TriMesh, ObjInfo), MeshError> {
     // Other mesh formats would parse as an OBJ with no faces; name them instead.
     let ext = path
         .extension()
@@ -55,9 +55,23 @@ pub fn read_obj_with_info(path: &Path) -> Result<(TriMesh, ObjInfo), MeshError> 
             });
         }
     }
-    let bytes = fs::read(path).map_err(|e| MeshError::Read {
-        file: path.to_path_buf(),
-        reason: e.to_string(),
+    let limit = (max_faces as u64)
+        .saturating_mul(crate::files::BYTES_PER_ELEMENT)
+        .max(1 << 20);
+    let why = format!("an OBJ of at most {max_faces} faces");
+    let bytes = crate::files::read_bounded(path, limit, &why).map_err(|e| match e {
+        crate::files::FileError::TooLarge { .. } => MeshError::TooLarge {
+            file: path.to_path_buf(),
+            what: e.to_string(),
+        },
+        crate::files::FileError::Unreadable { reason, .. } => MeshError::Read {
+            file: path.to_path_buf(),
+            reason,
+        },
+        other => MeshError::Read {
+            file: path.to_path_buf(),
+            reason: other.to_string(),
+        },
     })?;
     parse_obj_with_info(bytes, path)
 }
@@ -309,50 +323,6 @@ impl Parser<'_> {
     }
 }
 
-/// Writes `bytes` to `path` so that readers see either the old file or the complete new one:
-/// temporary file `.NAME.tmp-<pid>-<n>` in the same directory (same filesystem, so the rename
-/// is atomic), fsync, rename over the target, then fsync the directory (best effort).
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let name = path.file_name().ok_or_else(|| {
-        io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("{}: not a file path", path.display()),
-        )
-    })?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(
-        ".tmp-{}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let tmp = dir.join(tmp_name);
-
-    let result = (|| {
-        let mut f = fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        // The temporary may not exist (creation failed); nothing more to report then.
-        let _ = fs::remove_file(&tmp);
-        return result;
-    }
-    // Persist the rename itself. Directories cannot be opened as files on every platform, so a
-    // failure here is not an error of the write.
-    if let Ok(d) = fs::File::open(&dir) {
-        let _ = d.sync_all();
-    }
-    Ok(())
-}
-
 /// Shortest text that parses back to exactly `x`; exponent form only where plain decimals
 /// would be long (|x| < 1e-5 or ≥ 1e16).
 fn push_f64(out: &mut String, x: f64) {
@@ -390,35 +360,31 @@ fn push_header_and_vertices(out: &mut String, mesh: &TriMesh, uv: &[[f64; 2]]) {
     }
 }
 
-/// Writes the mesh with one texture coordinate per vertex (`uv` is #V×2): `v`, `vt`, then
+/// OBJ text of the mesh with one texture coordinate per vertex (`uv` is #V×2): `v`, `vt`, then
 /// `f a/a b/b c/c` (1-based) in the mesh's vertex and face order. Unreferenced vertices get a
-/// `vt` too, so `v` and `vt` indices coincide. Atomic, see [`write_atomic`].
-pub fn write_obj_with_uv(path: &Path, mesh: &TriMesh, uv: &[[f64; 2]]) -> io::Result<()> {
+/// `vt` too, so `v` and `vt` indices coincide.
+pub fn obj_text_with_uv(mesh: &TriMesh, uv: &[[f64; 2]]) -> io::Result<String> {
     if uv.len() != mesh.positions.len() {
         return Err(invalid_input(format!(
-            "{}: {} texture coordinates for {} vertices",
-            path.display(),
+            "{} texture coordinates for {} vertices",
             uv.len(),
             mesh.positions.len()
         )));
     }
-    let corner_uv: Vec<[u32; 3]> = mesh.faces.clone();
-    write_obj_with_corner_uv(path, mesh, uv, &corner_uv)
+    obj_text_with_corner_uv(mesh, uv, &mesh.faces)
 }
 
-/// Writes the mesh with texture coordinates indexed per face corner, as needed once seams are
-/// cut: `uv` is #T×2, `corner_uv` is #F×3 0-based indices into `uv`; face `f` is written as
-/// `f a/t0 b/t1 c/t2`. Atomic, see [`write_atomic`].
-pub fn write_obj_with_corner_uv(
-    path: &Path,
+/// OBJ text of the mesh with texture coordinates indexed per face corner, as needed once seams
+/// are cut: `uv` is #T×2, `corner_uv` is #F×3 0-based indices into `uv`; face `f` is written as
+/// `f a/t0 b/t1 c/t2`. Non-finite numbers are refused: nothing non-finite is ever written.
+pub fn obj_text_with_corner_uv(
     mesh: &TriMesh,
     uv: &[[f64; 2]],
     corner_uv: &[[u32; 3]],
-) -> io::Result<()> {
+) -> io::Result<String> {
     if corner_uv.len() != mesh.faces.len() {
         return Err(invalid_input(format!(
-            "{}: {} corner texture indices for {} faces",
-            path.display(),
+            "{} corner texture indices for {} faces",
             corner_uv.len(),
             mesh.faces.len()
         )));
@@ -429,8 +395,7 @@ pub fn write_obj_with_corner_uv(
         .find(|(_, c)| c.iter().any(|&t| t as usize >= uv.len()))
     {
         return Err(invalid_input(format!(
-            "{}: face {f} refers to a texture coordinate past the {} given",
-            path.display(),
+            "face {f} refers to a texture coordinate past the {} given",
             uv.len()
         )));
     }
@@ -441,12 +406,22 @@ pub fn write_obj_with_corner_uv(
         .find(|(_, c)| c.iter().any(|&v| v as usize >= mesh.positions.len()))
     {
         return Err(invalid_input(format!(
-            "{}: face {f} refers to a vertex past the {} given",
-            path.display(),
+            "face {f} refers to a vertex past the {} given",
             mesh.positions.len()
         )));
     }
 
+    let finite = |c: &[f64]| c.iter().all(|x| x.is_finite());
+    if let Some(v) = mesh.positions.iter().position(|p| !finite(p)) {
+        return Err(invalid_input(format!(
+            "vertex {v} has a non-finite coordinate"
+        )));
+    }
+    if let Some(t) = uv.iter().position(|p| !finite(p)) {
+        return Err(invalid_input(format!(
+            "texture coordinate {t} is not finite"
+        )));
+    }
     use std::fmt::Write as _;
     // ~30 bytes per v/vt line, ~25 per face line.
     let mut out =
@@ -465,5 +440,5 @@ pub fn write_obj_with_corner_uv(
             u64::from(t[2]) + 1
         );
     }
-    write_atomic(path, out.as_bytes())
+    Ok(out)
 }

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use super::{obj, MeshError, Topology, TriMesh};
+use super::{obj, MeshError, Scale, Topology, TriMesh};
 
 /// Thresholds of [`validate`].
 #[derive(Clone, Debug, PartialEq)]
@@ -12,7 +12,8 @@ pub struct ValidateOptions {
     /// A face is degenerate when its area ≤ `degenerate_rel_tol` × (bounding-box diagonal)²;
     /// relative, so the test does not depend on the file's units.
     pub degenerate_rel_tol: f64,
-    /// Refuse meshes with more faces than this (a memory / time guard for the caller).
+    /// Refuse meshes with more faces than this, and files larger than an OBJ of that many
+    /// faces (a memory / time guard; `None`: no limit).
     pub max_faces: Option<usize>,
 }
 
@@ -20,7 +21,7 @@ impl Default for ValidateOptions {
     fn default() -> Self {
         ValidateOptions {
             degenerate_rel_tol: 1e-12,
-            max_faces: None,
+            max_faces: Some(crate::files::DEFAULT_MAX_ELEMENTS),
         }
     }
 }
@@ -54,26 +55,8 @@ pub fn load(
     path: &Path,
     opts: &ValidateOptions,
 ) -> Result<(TriMesh, Topology, ValidationReport), MeshError> {
-    if let Some(max) = opts.max_faces {
-        // Refuse before reading: a file far larger than any OBJ of `max` faces would be would
-        // otherwise be read whole into memory first. A face with its share of vertices takes
-        // ~50 bytes of OBJ text; 256 per face leaves room for comments, normals and texture
-        // coordinates.
-        let limit = (max as u64).saturating_mul(256).max(1 << 20);
-        if let Ok(meta) = std::fs::metadata(path) {
-            if meta.len() > limit {
-                return Err(MeshError::TooLarge {
-                    file: path.to_path_buf(),
-                    what: format!(
-                        "the file has {} bytes, more than an OBJ of at most {max} faces needs \
-                         ({limit} bytes); raise the face limit to read it",
-                        meta.len()
-                    ),
-                });
-            }
-        }
-    }
-    let mesh = obj::read_obj(path)?;
+    let max = opts.max_faces.unwrap_or(usize::MAX);
+    let (mesh, _) = obj::read_obj_with_info(path, max)?;
     let (report, topo) = validate_with_topology(&mesh, path, opts)?;
     Ok((mesh, topo, report))
 }
@@ -146,34 +129,44 @@ pub fn validate_with_topology(
         }
     }
 
-    // Bounding box of the referenced vertices: a stray unused vertex must not change the scale.
+    // Areas on scale-normalised coordinates (see [`Scale`]): relative to the bounding box
+    // of the referenced vertices (a stray unused vertex must not change the scale), and free of
+    // underflow at 1e-100 or overflow at 1e100. Reported in the file's units.
+    let sim = Scale::fit(
+        mesh.faces
+            .iter()
+            .flatten()
+            .map(|&v| &mesh.positions[v as usize]),
+    );
+    let normalized: Vec<[f64; 3]> = mesh.positions.iter().map(|&p| sim.apply(p)).collect();
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for tri in &mesh.faces {
         for &v in tri {
-            let p = mesh.positions[v as usize];
+            let p = normalized[v as usize];
             for d in 0..3 {
                 lo[d] = lo[d].min(p[d]);
                 hi[d] = hi[d].max(p[d]);
             }
         }
     }
-    let bbox_diagonal = (0..3).map(|d| (hi[d] - lo[d]).powi(2)).sum::<f64>().sqrt();
-    let threshold = opts.degenerate_rel_tol * bbox_diagonal * bbox_diagonal;
-    let mut min_face_area = f64::INFINITY;
+    let diagonal = (0..3).map(|d| (hi[d] - lo[d]).powi(2)).sum::<f64>().sqrt();
+    let threshold = opts.degenerate_rel_tol * diagonal * diagonal;
+    let mut min_area = f64::INFINITY;
     for (f, tri) in mesh.faces.iter().enumerate() {
-        let area = face_area(mesh, tri);
-        // A NaN area (overflowing coordinates) is as unusable as a zero one.
+        let area = face_area(&normalized, tri);
         if area <= threshold || area.is_nan() {
             return Err(MeshError::Degenerate {
                 file: file.to_path_buf(),
                 face: f,
-                area,
-                threshold,
+                area: sim.length(sim.length(area)),
+                threshold: sim.length(sim.length(threshold)),
             });
         }
-        min_face_area = min_face_area.min(area);
+        min_area = min_area.min(area);
     }
+    let bbox_diagonal = sim.length(diagonal);
+    let min_face_area = sim.length(sim.length(min_area));
 
     // Duplicates: sort faces by their sorted vertex triple; report the duplicate with the
     // smallest face index, naming the first face with the same vertices.
@@ -238,8 +231,8 @@ pub fn validate_with_topology(
 }
 
 /// ½|(p1−p0)×(p2−p0)|; indices already checked.
-fn face_area(mesh: &TriMesh, tri: &[u32; 3]) -> f64 {
-    let [p0, p1, p2] = tri.map(|v| mesh.positions[v as usize]);
+fn face_area(positions: &[[f64; 3]], tri: &[u32; 3]) -> f64 {
+    let [p0, p1, p2] = tri.map(|v| positions[v as usize]);
     let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
     let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
     let n = [

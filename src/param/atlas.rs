@@ -13,7 +13,7 @@ use crate::param::job::{ParamJob, ParamOutput};
 use crate::param::map::{compute_map, MapOutput, Progress, SolverChoice, SolverPath};
 use crate::param::AdmmOptions;
 use crate::report::ParamReport;
-use crate::{Error, Result};
+use crate::Result;
 
 /// The cutting path of [`crate::param::job::run_param`]: cut into disk charts, map each chart, pack the charts
 /// into [0,1]², write the OBJ with the input's `v` (count and order) and one `vt` per split
@@ -195,13 +195,6 @@ pub(crate) fn run_atlas(
         }
         .into());
     }
-    mesh::obj::write_obj_with_corner_uv(&job.output, &input, &uv, &cutm.mesh.faces).map_err(
-        |source| Error::Io {
-            path: job.output.clone(),
-            source,
-        },
-    )?;
-    report.written = true;
 
     report.input = job.input.display().to_string();
     report.output = job.output.display().to_string();

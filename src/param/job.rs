@@ -3,11 +3,12 @@
 //! exit code (0 converged, 3 written but not converged, 2 bad input, 1 anything else).
 #![forbid(unsafe_code)]
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::files::Outputs;
 use crate::init::InitMethod;
-use crate::mesh::{self, TriMesh};
+use crate::mesh::{self, Scale, TriMesh};
 use crate::metrics;
 use crate::param::admm::AdmmOptions;
 use crate::param::atlas::run_atlas;
@@ -44,6 +45,10 @@ pub enum CutMode {
 pub struct ParamJob {
     pub input: PathBuf,
     pub output: PathBuf,
+    /// The JSON report, committed with the map.
+    pub report: Option<PathBuf>,
+    /// Pictures of the map and the run, committed with the map.
+    pub images: crate::viz::ImageOutputs,
     pub init: InitMethod,
     /// The solver of a disk mesh.
     pub solver: SolverChoice,
@@ -77,6 +82,8 @@ impl ParamJob {
         ParamJob {
             input: input.into(),
             output: output.into(),
+            report: None,
+            images: Default::default(),
             init: InitMethod::Lscm,
             solver: SolverChoice::Admm,
             atlas_solver: SolverChoice::Global,
@@ -94,22 +101,16 @@ impl ParamJob {
     }
 }
 
-/// Output of [`run_param`]: the map and its report (the map already written to `job.output`;
-/// `report.converged` says whether the stop test was met).
+/// Output of [`run_param`]: the map and its report (already written with the job's other
+/// outputs; `report.converged` says whether the stop test was met).
 pub struct ParamOutput {
-    /// The mesh the UVs belong to: the input, or the input split along its seams when it was
-    /// cut (same faces in the same order, one vertex per UV).
+    /// The mesh the UVs belong to, in the file's units: the input, or the input split along
+    /// its seams when it was cut (same faces in the same order, one vertex per UV; its faces
+    /// are the `vt` indices of the written OBJ).
     pub mesh: TriMesh,
     /// One UV per vertex of `mesh`.
     pub uv: Vec<[f64; 2]>,
     pub report: ParamReport,
-}
-
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (a.canonicalize(), b.canonicalize()) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => false,
-    }
 }
 
 /// Opens a Vulkan context for `job`, or says why the CPU backend runs instead.
@@ -124,32 +125,94 @@ fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
         BackendChoice::Cpu => Ok(None),
         BackendChoice::Vulkan => Ok(Some(Context::new(&desc)?)),
         BackendChoice::Auto => match Context::new(&desc) {
+            // A device the user named is a request: it runs there (even lavapipe) or fails.
+            Ok(ctx) if job.device.is_some() => Ok(Some(ctx)),
             // A CPU "GPU" (lavapipe) is slower than the native f64 backend on the same cores.
             Ok(ctx) if ctx.device_type() == crate::gpu::vk::PhysicalDeviceType::CPU => Ok(None),
             Ok(ctx) => Ok(Some(ctx)),
-            Err(e) if e.is_unavailable() => Ok(None),
+            // Falling back to the CPU silently would ignore a named device or the validation
+            // the user asked for.
+            Err(e) if e.is_unavailable() && job.device.is_none() && !job.validation => Ok(None),
             Err(e) => Err(e.into()),
         },
     }
 }
 
-/// `foldfree param`: load and validate, start map, solve, recover, measure, write the OBJ
-/// (atomically; never over the input). `progress` sees every ADMM residual check and every
-/// global-solver iteration.
+/// `foldfree param`: check the outputs, load and validate, normalise the scale, start map,
+/// solve, recover, measure, and commit the OBJ, report and pictures together (never over an
+/// input; on any error nothing is written). `progress` sees every ADMM residual check and
+/// every global-solver iteration.
 pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Result<ParamOutput> {
     let t0 = Instant::now();
-    if same_file(&job.input, &job.output) {
-        return Err(Error::Usage(format!(
-            "refusing to overwrite the input {}",
-            job.input.display()
-        )));
+    job.admm.validate()?;
+    let mut outputs = Outputs::new();
+    outputs.input(&job.input);
+    outputs.output(&job.output, "map", &["obj"])?;
+    if let Some(p) = &job.report {
+        outputs.output(p, "report", &["json"])?;
     }
-    let (mesh, topo, vreport) = mesh::load(&job.input, &job.validate)?;
+    job.images.plan(&mut outputs)?;
+    let (file_mesh, topo, vreport) = mesh::load(&job.input, &job.validate)?;
     if job.cut == CutMode::Never || (job.cut == CutMode::Auto && topo.is_disk()) {
         topo.require_disk(&job.input)?;
     }
+    // Every solver works at unit scale; UVs are scale-free, the OBJ keeps the file's `v`.
+    let scale = Scale::fit(
+        file_mesh
+            .faces
+            .iter()
+            .flatten()
+            .map(|&v| &file_mesh.positions[v as usize]),
+    );
+    let mesh = TriMesh {
+        positions: file_mesh
+            .positions
+            .iter()
+            .map(|&p| scale.apply(p))
+            .collect(),
+        faces: file_mesh.faces.clone(),
+    };
     let t_load = t0.elapsed().as_secs_f64();
+    let mut out = solve(job, mesh, &topo, &vreport, t0, t_load, progress)?;
+    // Pictures from the normalised mesh and its map (distortion colours compare the two).
+    job.images
+        .render(&out.mesh, &out.uv, &out.report.history, &mut outputs)?;
+    // Back to the file's units, exactly (a power of two): a disk's UVs have the mesh's scale,
+    // an atlas is packed into the unit square.
+    if out.report.atlas.is_none() {
+        for t in &mut out.uv {
+            *t = [scale.length(t[0]), scale.length(t[1])];
+        }
+    }
+    for p in &mut out.mesh.positions {
+        *p = scale.invert(*p);
+    }
+    let text =
+        mesh::obj::obj_text_with_corner_uv(&file_mesh, &out.uv, &out.mesh.faces).map_err(|e| {
+            Error::Solve(crate::linalg::SolveError::Failed {
+                what: format!("{}: {e}; nothing was written", job.output.display()),
+            })
+        })?;
+    outputs.set(&job.output, text.into_bytes());
+    out.report.written = true;
+    out.report.seconds = t0.elapsed().as_secs_f64();
+    if let Some(p) = &job.report {
+        outputs.set(p, report_json(&out.report)?);
+    }
+    outputs.commit()?;
+    Ok(out)
+}
 
+/// The solve of [`run_param`] on the normalised mesh: one disk, or the atlas path.
+fn solve(
+    job: &ParamJob,
+    mesh: TriMesh,
+    topo: &crate::mesh::Topology,
+    vreport: &mesh::ValidationReport,
+    t0: Instant,
+    t_load: f64,
+    progress: &mut dyn FnMut(Progress<'_>),
+) -> Result<ParamOutput> {
     let atlas = job.cut == CutMode::Always || !topo.is_disk();
     let solver = if atlas { job.atlas_solver } else { job.solver };
     let ctx = if solver == SolverChoice::Admm {
@@ -167,8 +230,8 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
         return run_atlas(
             job,
             mesh,
-            &topo,
-            &vreport,
+            topo,
+            vreport,
             solver,
             &admm,
             ctx.as_ref(),
@@ -179,7 +242,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     }
     let map = compute_map(
         &mesh,
-        &topo,
+        topo,
         job.init,
         solver,
         &admm,
@@ -189,11 +252,6 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     )?;
     let m = metrics::evaluate(&mesh.positions, &mesh.faces, &map.uv, &topo.boundary_loops);
     // compute_map returns flip-free maps only: every one is written.
-    mesh::obj::write_obj_with_uv(&job.output, &mesh, &map.uv).map_err(|source| Error::Io {
-        path: job.output.clone(),
-        source,
-    })?;
-
     let mut report = ParamReport {
         init: job.init.name().into(),
         init_flips: map.init_flips,
@@ -202,7 +260,6 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
         solver: solver.name().into(),
         solver_path: map.path.name().into(),
         stop: map.stop_summary(),
-        written: true,
         ..ParamReport::default()
     };
     if solver != SolverChoice::None {
@@ -239,12 +296,11 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     Ok(ParamOutput { mesh, uv, report })
 }
 
-/// Writes `report` as pretty JSON, atomically.
-pub fn write_report(path: &Path, report: &ParamReport) -> Result<()> {
-    let text =
-        serde_json::to_string_pretty(report).map_err(|e| Error::Usage(format!("report: {e}")))?;
-    mesh::obj::write_atomic(path, text.as_bytes()).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
+/// `report` as pretty JSON.
+fn report_json(report: &ParamReport) -> Result<Vec<u8>> {
+    serde_json::to_vec_pretty(report).map_err(|e| {
+        Error::Solve(crate::linalg::SolveError::Failed {
+            what: format!("report serialisation: {e}"),
+        })
     })
 }

@@ -15,5 +15,5 @@ pub mod recover;
 
 pub use admm::AdmmOptions;
 pub use energy::Energy;
-pub use job::{run_param, write_report, BackendChoice, CutMode, ParamJob, ParamOutput};
+pub use job::{run_param, BackendChoice, CutMode, ParamJob, ParamOutput};
 pub use map::{compute_map, MapOutput, Progress, SolverChoice, SolverPath};

@@ -23,6 +23,7 @@ pub mod svg;
 
 use std::path::{Path, PathBuf};
 
+use crate::files::Outputs;
 use crate::mesh::TriMesh;
 use crate::metrics::FaceDistortion;
 use crate::param::admm::History;
@@ -314,46 +315,55 @@ impl ImageOutputs {
     }
 }
 
-/// Writes the requested pictures of a map and its run history, each atomically through
-/// [`crate::mesh::obj::write_atomic`] (a reader never sees half a picture). The face
-/// distortions are computed once for both layout pictures. Errors are [`Error::Io`] naming
-/// the file.
-pub fn write_images(
-    mesh: &TriMesh,
-    uv: &[[f64; 2]],
-    history: &[History],
-    outs: &ImageOutputs,
-) -> Result<()> {
-    if outs.layout_svg.is_some() || outs.layout_png.is_some() {
-        let (bins, stats) = classify(mesh, uv, outs.style.delta_max);
-        if let Some(path) = &outs.layout_svg {
-            let text = svg::render_layout(mesh, uv, &bins, &stats, &outs.style);
-            write_file(path, text.as_bytes())?;
+impl ImageOutputs {
+    /// Reserves the requested pictures' paths in the run's outputs (checked before the run).
+    pub fn plan(&self, outputs: &mut Outputs) -> Result<()> {
+        for (p, what, ext) in [
+            (&self.layout_svg, "layout picture", "svg"),
+            (&self.layout_png, "layout picture", "png"),
+            (&self.plot_svg, "convergence plot", "svg"),
+            (&self.plot_png, "convergence plot", "png"),
+        ] {
+            if let Some(p) = p {
+                outputs.output(p, what, &[ext])?;
+            }
         }
-        if let Some(path) = &outs.layout_png {
-            let bytes = raster::render_layout(mesh, uv, &bins, outs.png_size, &outs.style)
-                .encode_png()
-                .map_err(|e| io_error(path, e))?;
-            write_file(path, &bytes)?;
-        }
+        Ok(())
     }
-    if let Some(path) = &outs.plot_svg {
-        write_file(path, convergence_svg(history).as_bytes())?;
-    }
-    if let Some(path) = &outs.plot_png {
-        let (w, h) = outs.plot_size;
-        let bytes = plot::render_png(history, w, h).map_err(|e| io_error(path, e))?;
-        write_file(path, &bytes)?;
-    }
-    Ok(())
-}
 
-/// [`crate::mesh::obj::write_atomic`] with the error mapped to [`Error::Io`].
-pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    crate::mesh::obj::write_atomic(path, bytes).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    /// Renders the requested pictures of a map and its run history into the run's outputs
+    /// (planned with [`ImageOutputs::plan`]; committed with the map). The face distortions are
+    /// computed once for both layout pictures.
+    pub fn render(
+        &self,
+        mesh: &TriMesh,
+        uv: &[[f64; 2]],
+        history: &[History],
+        outputs: &mut Outputs,
+    ) -> Result<()> {
+        if self.layout_svg.is_some() || self.layout_png.is_some() {
+            let (bins, stats) = classify(mesh, uv, self.style.delta_max);
+            if let Some(path) = &self.layout_svg {
+                let text = svg::render_layout(mesh, uv, &bins, &stats, &self.style);
+                outputs.set(path, text.into_bytes());
+            }
+            if let Some(path) = &self.layout_png {
+                let bytes = raster::render_layout(mesh, uv, &bins, self.png_size, &self.style)
+                    .encode_png()
+                    .map_err(|e| io_error(path, e))?;
+                outputs.set(path, bytes);
+            }
+        }
+        if let Some(path) = &self.plot_svg {
+            outputs.set(path, convergence_svg(history).into_bytes());
+        }
+        if let Some(path) = &self.plot_png {
+            let (w, h) = self.plot_size;
+            let bytes = plot::render_png(history, w, h).map_err(|e| io_error(path, e))?;
+            outputs.set(path, bytes);
+        }
+        Ok(())
+    }
 }
 
 fn io_error(path: &Path, source: std::io::Error) -> Error {

@@ -146,10 +146,16 @@ fn no_vt(name: &str) -> Error {
 }
 
 /// Reads `path` with [`parse_obj_with_uv`].
-pub fn read_obj_with_uv(path: &Path) -> Result<UvObj> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
+pub fn read_obj_with_uv(path: &Path, max_faces: usize) -> Result<UvObj> {
+    let limit = (max_faces as u64)
+        .saturating_mul(crate::files::BYTES_PER_ELEMENT)
+        .max(1 << 20);
+    let bytes = crate::files::read_bounded(path, limit, "the --max-faces limit")?;
+    let text = String::from_utf8(bytes).map_err(|_| {
+        crate::Error::Mesh(crate::mesh::MeshError::Read {
+            file: path.to_path_buf(),
+            reason: "not UTF-8 text (binary file?)".into(),
+        })
     })?;
     parse_obj_with_uv(&text, &path.display().to_string())
 }

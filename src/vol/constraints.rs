@@ -58,7 +58,11 @@ pub fn parse_constraints(
 
 /// Reads a constraints file.
 pub fn read_constraints(path: &Path, nv: usize) -> Result<Vec<(u32, [f64; 3])>, VolError> {
-    let text = super::error::read_text(path)?;
+    // A constraint line takes at least 8 bytes; more lines than vertices cannot be valid.
+    let limit = (nv as u64)
+        .saturating_mul(crate::files::BYTES_PER_ELEMENT)
+        .max(1 << 20);
+    let text = super::error::read_text(path, limit)?;
     parse_constraints(&text, path, nv)
 }
 

@@ -66,6 +66,9 @@ pub enum VolError {
     /// The result is unusable (inverted tets, NaN); it is not written.
     #[error("{0}")]
     BadResult(String),
+    /// An input cannot be read, or an output path is unusable.
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
 }
 
 impl VolError {
@@ -73,18 +76,16 @@ impl VolError {
     pub fn exit_code(&self) -> i32 {
         match self {
             VolError::Io { .. } | VolError::Solve(_) | VolError::BadResult(_) => 1,
+            VolError::File(e) => e.exit_code(),
             _ => 2,
         }
     }
 }
 
-/// Reads a text input file: invalid UTF-8 (a binary file) is bad input at the line of the first
-/// bad byte (exit 2), not an I/O failure.
-pub(crate) fn read_text(path: &std::path::Path) -> Result<String, VolError> {
-    let bytes = std::fs::read(path).map_err(|source| VolError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+/// Reads a text input file of at most `limit` bytes: a missing or unreadable file and invalid
+/// UTF-8 (a binary file, at the line of the first bad byte) are bad input (exit 2).
+pub(crate) fn read_text(path: &std::path::Path, limit: u64) -> Result<String, VolError> {
+    let bytes = crate::files::read_bounded(path, limit, "the --max-tets limit")?;
     String::from_utf8(bytes).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
         let line = 1 + e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count();

@@ -9,9 +9,10 @@ use serde::Serialize;
 use super::ball::{ball_target, slide_on_sphere, SlideReport};
 use super::constraints::{constraints_text, read_constraints};
 use super::harmonic::harmonic_extension;
-use super::tetgen::{read_any, write_any};
+use super::tetgen::{output_files, output_texts, parse_output, read_any_with_limit, tetgen_paths};
 use super::volmap::{evaluate, volmap, MapQuality, VolmapOptions, VolmapReport};
 use super::{TetMesh, VolError};
+use crate::files::{Outputs, DEFAULT_MAX_ELEMENTS};
 
 /// Where the position constraints come from.
 #[derive(Clone, Debug, PartialEq)]
@@ -35,7 +36,51 @@ pub struct VolmapJob {
     /// Where to write the constraints the map meets (`vertex x y z`).
     pub write_constraints: Option<PathBuf>,
     pub quiet: bool,
+    /// Refuse meshes of more tets (and files larger than such a mesh's text).
+    pub max_tets: usize,
     pub options: VolmapOptions,
+}
+
+impl VolmapJob {
+    /// A job with the default options and limits.
+    pub fn new(
+        rest: impl Into<PathBuf>,
+        constraints: ConstraintSource,
+        output: impl Into<PathBuf>,
+    ) -> VolmapJob {
+        VolmapJob {
+            rest: rest.into(),
+            init: None,
+            constraints,
+            output: output.into(),
+            report: None,
+            write_constraints: None,
+            quiet: true,
+            max_tets: DEFAULT_MAX_ELEMENTS,
+            options: VolmapOptions::default(),
+        }
+    }
+}
+
+/// Records a tet mesh input (both files of a TetGen pair) in a run's outputs.
+pub fn tet_input(outputs: &mut Outputs, path: &Path) {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("node") | Some("ele") => {
+            let (n, e) = tetgen_paths(path);
+            outputs.input(&n).input(&e);
+        }
+        _ => {
+            outputs.input(path);
+        }
+    }
+}
+
+/// Plans a tet mesh output (both files of a TetGen pair) in a run's outputs.
+pub fn tet_output(outputs: &mut Outputs, path: &Path, what: &str) -> Result<(), VolError> {
+    for f in output_files(path)? {
+        outputs.output(&f, what, &["mesh", "node", "ele"])?;
+    }
+    Ok(())
 }
 
 /// The JSON written by `--report`.
@@ -58,16 +103,23 @@ pub struct VolmapFileReport {
     pub written: MapQuality,
 }
 
-/// Reads a rest mesh and checks it (orientation, zero volumes).
-pub fn read_rest(path: &Path) -> Result<TetMesh, VolError> {
-    let m = read_any(path)?;
+/// Reads a rest mesh of at most `max_tets` tets and checks it (structure, orientation, zero
+/// volumes).
+pub fn read_rest(path: &Path, max_tets: usize) -> Result<TetMesh, VolError> {
+    let m = read_any_with_limit(path, max_tets)?;
     m.check_rest(path)?;
     Ok(m)
 }
 
 /// Reads a map of `rest` (same tets), returning its positions.
 pub fn read_map(rest: &TetMesh, rest_path: &Path, path: &Path) -> Result<Vec<[f64; 3]>, VolError> {
-    let m = read_any(path)?;
+    let m = read_any_with_limit(path, rest.tets.len())?;
+    same_tets(rest, rest_path, &m, path)?;
+    Ok(m.positions)
+}
+
+/// `m` (read from `path`) has the vertex count and the tets of `rest`.
+fn same_tets(rest: &TetMesh, rest_path: &Path, m: &TetMesh, path: &Path) -> Result<(), VolError> {
     if m.positions.len() != rest.positions.len() || m.tets != rest.tets {
         return Err(VolError::Input(format!(
             "{}: not a map of {} ({} vertices / {} tets against {} / {}, or different tets)",
@@ -79,7 +131,7 @@ pub fn read_map(rest: &TetMesh, rest_path: &Path, path: &Path) -> Result<Vec<[f6
             rest.tets.len()
         )));
     }
-    Ok(m.positions)
+    Ok(())
 }
 
 /// Constraints of a mode, given the rest mesh and the (optional) init positions.
@@ -102,14 +154,27 @@ pub fn constraints_for(
     }
 }
 
-/// Runs a job end to end and returns the report (also written to `job.report`).
+/// Runs a job end to end and returns the report. Every output (the map, its TetGen pair, the
+/// report, the constraints met) is checked before the work and committed together after the
+/// written map was re-read and checked; on any error nothing is written.
 pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
-    if job.output == job.rest || Some(&job.output) == job.init.as_ref() {
-        return Err(VolError::Input(
-            "refusing to overwrite an input with the output".into(),
-        ));
+    job.options.validate()?;
+    let mut outputs = Outputs::new();
+    tet_input(&mut outputs, &job.rest);
+    if let Some(p) = &job.init {
+        tet_input(&mut outputs, p);
     }
-    let rest = read_rest(&job.rest)?;
+    if let ConstraintSource::File(p) = &job.constraints {
+        outputs.input(p);
+    }
+    tet_output(&mut outputs, &job.output, "map")?;
+    if let Some(p) = &job.report {
+        outputs.output(p, "report", &["json"])?;
+    }
+    if let Some(p) = &job.write_constraints {
+        outputs.output(p, "constraints", &[])?;
+    }
+    let rest = read_rest(&job.rest, job.max_tets)?;
     let init_pos = match &job.init {
         Some(p) => Some(read_map(&rest, &job.rest, p)?),
         None => None,
@@ -166,16 +231,21 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     });
     bar.finish_and_clear();
     let (x, run) = out?;
-    write_any(&job.output, &rest, &x)?;
-    // Independent check of what was written.
-    let written_pos = read_map(&rest, &job.rest, &job.output)?;
-    let written = evaluate(&rest, &written_pos, &targets);
-    if written.inverted > 0 {
+    let texts = output_texts(&job.output, &rest, &x)?;
+    // Independent check of what will be written: parsed back from the text.
+    let written_mesh = parse_output(&job.output, &texts)?;
+    same_tets(&rest, &job.rest, &written_mesh, &job.output)?;
+    let written = evaluate(&rest, &written_mesh.positions, &targets);
+    if written.inverted > 0 || !written.delta_t.is_finite() {
         return Err(VolError::BadResult(format!(
-            "{}: {} inverted tet(s) after writing",
+            "{}: the map has {} inverted tet(s) (δ_t {}); nothing was written",
             job.output.display(),
-            written.inverted
+            written.inverted,
+            written.delta_t
         )));
+    }
+    for (f, t) in output_files(&job.output)?.iter().zip(texts) {
+        outputs.set(f, t.into_bytes());
     }
     let report = VolmapFileReport {
         rest: job.rest.display().to_string(),
@@ -197,20 +267,13 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
             job.output.display(),
             job.rest.display()
         );
-        crate::mesh::write_atomic(p, constraints_text(&targets, &header).as_bytes()).map_err(
-            |source| VolError::Io {
-                path: p.clone(),
-                source,
-            },
-        )?;
+        outputs.set(p, constraints_text(&targets, &header).into_bytes());
     }
     if let Some(p) = &job.report {
-        let text = serde_json::to_string_pretty(&report)
+        let text = serde_json::to_vec_pretty(&report)
             .map_err(|e| VolError::BadResult(format!("report serialisation: {e}")))?;
-        crate::mesh::write_atomic(p, text.as_bytes()).map_err(|source| VolError::Io {
-            path: p.clone(),
-            source,
-        })?;
+        outputs.set(p, text);
     }
+    outputs.commit()?;
     Ok(report)
 }

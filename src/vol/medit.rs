@@ -9,45 +9,63 @@ use std::path::Path;
 use super::tet::TetMesh;
 use super::VolError;
 
-/// A token and its 1-based line.
+/// A stream of whitespace tokens with their 1-based lines: it holds one line at a time, so the
+/// reader's memory is the mesh it builds, not a copy of the file's tokens.
 struct Tokens<'a> {
-    toks: Vec<(&'a str, usize)>,
-    pos: usize,
+    lines: std::iter::Enumerate<std::str::Lines<'a>>,
+    current: std::str::SplitWhitespace<'a>,
+    line: usize,
+    peeked: Option<(&'a str, usize)>,
+    /// The line of the last token seen (for errors at the end of the file).
+    last: usize,
     file: &'a Path,
 }
 
 impl<'a> Tokens<'a> {
     fn new(text: &'a str, file: &'a Path) -> Tokens<'a> {
-        let mut toks = Vec::new();
-        for (i, line) in text.lines().enumerate() {
-            let line = line.split('#').next().unwrap_or("");
-            for t in line.split_whitespace() {
-                toks.push((t, i + 1));
-            }
+        Tokens {
+            lines: text.lines().enumerate(),
+            current: "".split_whitespace(),
+            line: 0,
+            peeked: None,
+            last: 1,
+            file,
         }
-        Tokens { toks, pos: 0, file }
+    }
+
+    fn pull(&mut self) -> Option<(&'a str, usize)> {
+        loop {
+            if let Some(t) = self.current.next() {
+                self.last = self.line;
+                return Some((t, self.line));
+            }
+            let (i, l) = self.lines.next()?;
+            self.line = i + 1;
+            self.current = l.split('#').next().unwrap_or("").split_whitespace();
+        }
+    }
+
+    fn peek(&mut self) -> Option<(&'a str, usize)> {
+        if self.peeked.is_none() {
+            self.peeked = self.pull();
+        }
+        self.peeked
+    }
+
+    fn advance(&mut self) -> Option<(&'a str, usize)> {
+        self.peeked.take().or_else(|| self.pull())
     }
 
     fn last_line(&self) -> usize {
-        self.toks.last().map_or(1, |t| t.1)
+        self.last
     }
 
     fn next(&mut self, what: &str) -> Result<(&'a str, usize), VolError> {
-        match self.toks.get(self.pos) {
-            Some(&t) => {
-                self.pos += 1;
-                Ok(t)
-            }
-            None => Err(VolError::Truncated {
-                file: self.file.to_path_buf(),
-                line: self.last_line(),
-                what: format!("expected {what}"),
-            }),
-        }
-    }
-
-    fn peek(&self) -> Option<(&'a str, usize)> {
-        self.toks.get(self.pos).copied()
+        self.advance().ok_or_else(|| VolError::Truncated {
+            file: self.file.to_path_buf(),
+            line: self.last_line(),
+            what: format!("expected {what}"),
+        })
     }
 
     fn parse<T: std::str::FromStr>(&mut self, what: &str) -> Result<(T, usize), VolError> {
@@ -70,8 +88,7 @@ pub fn parse_medit(text: &str, file: &Path) -> Result<TetMesh, VolError> {
     let mut tet_lines = Vec::new();
     let mut have_vertices = false;
     let mut have_tets = false;
-    while let Some((kw, line)) = tk.peek() {
-        tk.pos += 1;
+    while let Some((kw, line)) = tk.advance() {
         match kw {
             "MeshVersionFormatted" => {
                 tk.parse::<i64>("a format version")?;
@@ -85,6 +102,15 @@ pub fn parse_medit(text: &str, file: &Path) -> Result<TetMesh, VolError> {
                         msg: format!("dimension {d}: only 3 is supported"),
                     });
                 }
+            }
+            "Vertices" | "Tetrahedra"
+                if (kw == "Vertices" && have_vertices) || (kw == "Tetrahedra" && have_tets) =>
+            {
+                return Err(VolError::Parse {
+                    file: file.to_path_buf(),
+                    line,
+                    msg: format!("a second {kw} section (a mesh has one)"),
+                });
             }
             "Vertices" => {
                 let (n, _) = tk.parse::<usize>("the vertex count")?;
@@ -164,15 +190,15 @@ pub fn parse_medit(text: &str, file: &Path) -> Result<TetMesh, VolError> {
                     None => {
                         // Unknown section: one record per line.
                         let stop = count_line.saturating_add(n);
-                        if tk.last_line() < stop {
+                        while tk.peek().is_some_and(|(_, l)| l <= stop) {
+                            tk.advance();
+                        }
+                        if tk.peek().is_none() && tk.last_line() < stop {
                             return Err(VolError::Truncated {
                                 file: file.to_path_buf(),
                                 line: tk.last_line(),
                                 what: format!("section {kw} announces {n} records"),
                             });
-                        }
-                        while tk.peek().is_some_and(|(_, l)| l <= stop) {
-                            tk.pos += 1;
                         }
                     }
                 }
@@ -214,8 +240,8 @@ pub fn parse_medit(text: &str, file: &Path) -> Result<TetMesh, VolError> {
 }
 
 /// Reads a MEDIT `.mesh` file.
-pub fn read_medit(path: &Path) -> Result<TetMesh, VolError> {
-    let text = super::error::read_text(path)?;
+pub fn read_medit(path: &Path, limit: u64) -> Result<TetMesh, VolError> {
+    let text = super::error::read_text(path, limit)?;
     parse_medit(&text, path)
 }
 
@@ -245,16 +271,6 @@ pub fn medit_text(mesh: &TetMesh, positions: &[[f64; 3]]) -> String {
     }
     s.push_str("End\n");
     s
-}
-
-/// Writes `mesh` at `positions` atomically.
-pub fn write_medit(path: &Path, mesh: &TetMesh, positions: &[[f64; 3]]) -> Result<(), VolError> {
-    crate::mesh::write_atomic(path, medit_text(mesh, positions).as_bytes()).map_err(|source| {
-        VolError::Io {
-            path: path.to_path_buf(),
-            source,
-        }
-    })
 }
 
 #[cfg(test)]

@@ -22,7 +22,7 @@ pub use error::VolError;
 
 /// Position constraints: (vertex, target position).
 pub type Targets = Vec<(u32, [f64; 3])>;
-pub use medit::{read_medit, write_medit};
+pub use medit::read_medit;
 pub use tet::TetMesh;
-pub use tetgen::{read_any, write_any};
+pub use tetgen::{read_any, read_any_with_limit, write_any};
 pub use volmap::{evaluate, volmap, MapQuality, VolmapOptions, VolmapReport};

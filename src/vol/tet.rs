@@ -71,6 +71,53 @@ impl TetMesh {
             .collect()
     }
 
+    /// Rejects what no reader should accept as a tet mesh, wherever it came from: no vertex or
+    /// no tet, a tet that uses one vertex twice, or two tets on the same four vertices (one
+    /// of them is a copy: the mesh double-counts volume and the boundary surface breaks).
+    pub fn check_structure(&self, file: &Path) -> Result<(), VolError> {
+        if self.positions.is_empty() || self.tets.is_empty() {
+            return Err(VolError::Input(format!(
+                "{}: no {}: a volumetric map needs at least one tetrahedron",
+                file.display(),
+                if self.positions.is_empty() {
+                    "vertices"
+                } else {
+                    "tetrahedra"
+                }
+            )));
+        }
+        check_indices(&self.tets, self.positions.len(), file)?;
+        let mut keyed: Vec<([u32; 4], usize)> = self
+            .tets
+            .iter()
+            .enumerate()
+            .map(|(t, tet)| {
+                let mut k = *tet;
+                k.sort_unstable();
+                (k, t)
+            })
+            .collect();
+        if let Some(&(k, t)) = keyed
+            .iter()
+            .find(|(k, _)| k.windows(2).any(|w| w[0] == w[1]))
+        {
+            return Err(VolError::Input(format!(
+                "{}: tet {t} uses vertex {} twice",
+                file.display(),
+                k.windows(2).find(|w| w[0] == w[1]).map_or(0, |w| w[0])
+            )));
+        }
+        keyed.sort_unstable();
+        if let Some(w) = keyed.windows(2).find(|w| w[0].0 == w[1].0) {
+            let (a, b) = (w[0].1.min(w[1].1), w[0].1.max(w[1].1));
+            return Err(VolError::Input(format!(
+                "{}: tet {b} is a duplicate of tet {a} (same four vertices)",
+                file.display()
+            )));
+        }
+        Ok(())
+    }
+
     /// Rejects a rest shape with a flat or inverted tet: the Jacobians (and the energy) are
     /// defined relative to it, so one bad tet poisons the whole problem. Flat means volume
     /// ≤ 1e-15·diag³ (far below any real mesh's smallest tet, far above round-off).

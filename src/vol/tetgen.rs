@@ -6,20 +6,18 @@ use std::path::{Path, PathBuf};
 use super::tet::TetMesh;
 use super::VolError;
 
-/// Non-empty, comment-stripped lines with their 1-based numbers.
-fn records(text: &str) -> Vec<(usize, Vec<&str>)> {
-    text.lines()
-        .enumerate()
-        .filter_map(|(i, l)| {
-            let toks: Vec<&str> = l
-                .split('#')
-                .next()
-                .unwrap_or("")
-                .split_whitespace()
-                .collect();
-            (!toks.is_empty()).then_some((i + 1, toks))
-        })
-        .collect()
+/// Non-empty, comment-stripped lines with their 1-based numbers, as a stream: nothing is held
+/// but the current line, so memory does not grow with the file.
+fn records(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
+    text.lines().enumerate().filter_map(|(i, l)| {
+        let toks: Vec<&str> = l
+            .split('#')
+            .next()
+            .unwrap_or("")
+            .split_whitespace()
+            .collect();
+        (!toks.is_empty()).then_some((i + 1, toks))
+    })
 }
 
 fn num<T: std::str::FromStr>(
@@ -40,6 +38,38 @@ fn num<T: std::str::FromStr>(
     })
 }
 
+/// A record must have exactly the fields its header announces: a short record would read the
+/// next column as the wrong quantity, a long one means the header is wrong.
+fn fields(
+    toks: &[&str],
+    want: usize,
+    file: &Path,
+    line: usize,
+    what: &str,
+) -> Result<(), VolError> {
+    if toks.len() == want {
+        return Ok(());
+    }
+    Err(VolError::Parse {
+        file: file.to_path_buf(),
+        line,
+        msg: format!(
+            "{what} has {} fields, the header announces {want}",
+            toks.len()
+        ),
+    })
+}
+
+/// The header counts of `.node` / `.ele` are untrusted: sums are checked, and a count larger
+/// than the lines of the file is found to be truncated by reading, never by arithmetic.
+fn count_plus(a: usize, b: usize, file: &Path, line: usize) -> Result<usize, VolError> {
+    a.checked_add(b).ok_or_else(|| VolError::Parse {
+        file: file.to_path_buf(),
+        line,
+        msg: format!("field counts {a} + {b} overflow"),
+    })
+}
+
 /// The `.node` and `.ele` paths for a path naming either file or their common stem.
 pub fn tetgen_paths(path: &Path) -> (PathBuf, PathBuf) {
     let stem = match path.extension().and_then(|e| e.to_str()) {
@@ -57,126 +87,182 @@ pub fn tetgen_paths(path: &Path) -> (PathBuf, PathBuf) {
 pub type NodeFile = (Vec<[f64; 3]>, Vec<i64>, i64);
 
 /// Parses `.node` text: positions and boundary markers (as vertex references), and the index
-/// base.
+/// base. Records past the announced count are an error (a wrong header).
 pub fn parse_node(text: &str, file: &Path) -> Result<NodeFile, VolError> {
-    let recs = records(text);
-    let (hl, head) = recs.first().ok_or_else(|| VolError::Truncated {
+    let mut recs = records(text);
+    let (hl, head) = recs.next().ok_or_else(|| VolError::Truncated {
         file: file.to_path_buf(),
         line: 1,
         what: "empty .node file".into(),
     })?;
-    let n: usize = num(head.first(), file, *hl, "the point count")?;
-    let dim: usize = num(head.get(1), file, *hl, "the dimension")?;
+    fields(&head, head.len().clamp(2, 4), file, hl, "the header")?;
+    let n: usize = num(head.first(), file, hl, "the point count")?;
+    let dim: usize = num(head.get(1), file, hl, "the dimension")?;
     if dim != 3 {
         return Err(VolError::Parse {
             file: file.to_path_buf(),
-            line: *hl,
+            line: hl,
             msg: format!("dimension {dim}: only 3 is supported"),
         });
     }
-    let nattr: usize = head.get(2).map_or(Ok(0), |_| {
-        num(head.get(2), file, *hl, "the attribute count")
-    })?;
+    let nattr: usize = head
+        .get(2)
+        .map_or(Ok(0), |_| num(head.get(2), file, hl, "the attribute count"))?;
     let nmark: usize = head
         .get(3)
-        .map_or(Ok(0), |_| num(head.get(3), file, *hl, "the marker count"))?;
-    if recs.len() < n + 1 {
-        return Err(VolError::Truncated {
+        .map_or(Ok(0), |_| num(head.get(3), file, hl, "the marker count"))?;
+    if nmark > 1 {
+        return Err(VolError::Parse {
             file: file.to_path_buf(),
-            line: recs.last().map_or(1, |r| r.0),
-            what: format!("{n} points announced, {} found", recs.len() - 1),
+            line: hl,
+            msg: format!("{nmark} boundary markers per point: TetGen writes 0 or 1"),
         });
     }
-    // The header count is untrusted: reserve no more than the records present.
-    let mut pos = Vec::with_capacity(n.min(recs.len()));
-    let mut refs = Vec::with_capacity(n.min(recs.len()));
+    let width = count_plus(4, count_plus(nattr, nmark, file, hl)?, file, hl)?;
+    // The header count is untrusted: reserve no more than the text could hold (a point takes
+    // at least 8 bytes: four one-character fields and their separators).
+    let mut pos = Vec::with_capacity(n.min(text.len() / 8));
+    let mut refs = Vec::with_capacity(n.min(text.len() / 8));
     let mut base = 0;
-    for (i, (l, t)) in recs[1..=n].iter().enumerate() {
-        let idx: i64 = num(t.first(), file, *l, "a point index")?;
+    let mut last = hl;
+    for i in 0..n {
+        let Some((l, t)) = recs.next() else {
+            return Err(VolError::Truncated {
+                file: file.to_path_buf(),
+                line: last,
+                what: format!("{n} points announced, {i} found"),
+            });
+        };
+        last = l;
+        fields(&t, width, file, l, "a point")?;
+        let idx: i64 = num(t.first(), file, l, "a point index")?;
         if i == 0 {
             base = idx;
+            if base != 0 && base != 1 {
+                return Err(VolError::Parse {
+                    file: file.to_path_buf(),
+                    line: l,
+                    msg: format!("first point index {idx}: TetGen numbers from 0 or 1"),
+                });
+            }
         }
         if idx != base + i as i64 {
             return Err(VolError::Parse {
                 file: file.to_path_buf(),
-                line: *l,
+                line: l,
                 msg: format!("point index {idx}, expected {}", base + i as i64),
             });
         }
         let mut p = [0.0f64; 3];
         for k in 0..3 {
-            p[k] = num(t.get(1 + k), file, *l, "a coordinate")?;
+            p[k] = num(t.get(1 + k), file, l, "a coordinate")?;
         }
         if p.iter().any(|c| !c.is_finite()) {
             return Err(VolError::NonFinite {
                 file: file.to_path_buf(),
-                line: *l,
+                line: l,
                 vertex: i,
             });
         }
         let r = if nmark > 0 {
-            num(t.get(4 + nattr), file, *l, "a boundary marker")?
+            num(t.get(4 + nattr), file, l, "a boundary marker")?
         } else {
             0
         };
         pos.push(p);
         refs.push(r);
     }
+    if let Some((l, _)) = recs.next() {
+        return Err(VolError::Parse {
+            file: file.to_path_buf(),
+            line: l,
+            msg: format!("a record after the {n} points the header announces"),
+        });
+    }
     Ok((pos, refs, base))
 }
 
-/// Parses `.ele` text against `nv` vertices whose first index is `base`.
+/// Parses `.ele` text against `nv` vertices whose first index is `base`. A 10-node tet's
+/// corners are its first four nodes; every record must have all announced fields.
 pub fn parse_ele(
     text: &str,
     file: &Path,
     nv: usize,
     base: i64,
 ) -> Result<(Vec<[u32; 4]>, Vec<i64>), VolError> {
-    let recs = records(text);
-    let (hl, head) = recs.first().ok_or_else(|| VolError::Truncated {
+    let mut recs = records(text);
+    let (hl, head) = recs.next().ok_or_else(|| VolError::Truncated {
         file: file.to_path_buf(),
         line: 1,
         what: "empty .ele file".into(),
     })?;
-    let n: usize = num(head.first(), file, *hl, "the tet count")?;
-    let npt: usize = num(head.get(1), file, *hl, "the nodes per tet")?;
+    fields(&head, head.len().clamp(2, 3), file, hl, "the header")?;
+    let n: usize = num(head.first(), file, hl, "the tet count")?;
+    let npt: usize = num(head.get(1), file, hl, "the nodes per tet")?;
     if npt != 4 && npt != 10 {
         return Err(VolError::Parse {
             file: file.to_path_buf(),
-            line: *hl,
+            line: hl,
             msg: format!("{npt} nodes per tet: only 4 (or 10, corners used) are supported"),
         });
     }
-    let nattr: usize = head.get(2).map_or(Ok(0), |_| {
-        num(head.get(2), file, *hl, "the attribute count")
-    })?;
-    if recs.len() < n + 1 {
-        return Err(VolError::Truncated {
-            file: file.to_path_buf(),
-            line: recs.last().map_or(1, |r| r.0),
-            what: format!("{n} tets announced, {} found", recs.len() - 1),
-        });
-    }
-    let mut tets = Vec::with_capacity(n.min(recs.len()));
-    let mut refs = Vec::with_capacity(n.min(recs.len()));
-    for (ti, (l, t)) in recs[1..=n].iter().enumerate() {
+    let nattr: usize = head
+        .get(2)
+        .map_or(Ok(0), |_| num(head.get(2), file, hl, "the attribute count"))?;
+    let width = count_plus(1 + npt, nattr, file, hl)?;
+    let mut tets = Vec::with_capacity(n.min(text.len() / 10));
+    let mut refs = Vec::with_capacity(n.min(text.len() / 10));
+    let mut last = hl;
+    let mut tbase = 0i64;
+    for ti in 0..n {
+        let Some((l, t)) = recs.next() else {
+            return Err(VolError::Truncated {
+                file: file.to_path_buf(),
+                line: last,
+                what: format!("{n} tets announced, {ti} found"),
+            });
+        };
+        last = l;
+        fields(&t, width, file, l, "a tet")?;
+        let idx: i64 = num(t.first(), file, l, "a tet index")?;
+        if ti == 0 {
+            tbase = idx;
+        }
+        if (tbase != 0 && tbase != 1) || idx != tbase + ti as i64 {
+            return Err(VolError::Parse {
+                file: file.to_path_buf(),
+                line: l,
+                msg: format!("tet index {idx}: TetGen numbers tets in sequence from 0 or 1"),
+            });
+        }
         let mut tet = [0u32; 4];
-        for k in 0..4 {
-            let v: i64 = num(t.get(1 + k), file, *l, "a vertex index")?;
-            let z = v - base;
-            if z < 0 || z as usize >= nv {
+        let mut nodes = Vec::with_capacity(npt);
+        for k in 0..npt {
+            let v: i64 = num(t.get(1 + k), file, l, "a vertex index")?;
+            let z = v
+                .checked_sub(base)
+                .filter(|&z| z >= 0 && (z as u64) < nv as u64);
+            let Some(z) = z else {
                 return Err(VolError::BadIndex {
                     file: file.to_path_buf(),
-                    line: *l,
+                    line: l,
                     tet: ti,
                     index: v,
                     count: nv,
                 });
-            }
-            tet[k] = z as u32;
+            };
+            nodes.push(z as u32);
         }
+        tet.copy_from_slice(&nodes[..4]);
         let r = if nattr > 0 {
-            let a: f64 = num(t.get(1 + npt), file, *l, "a region attribute")?;
+            let a: f64 = num(t.get(1 + npt), file, l, "a region attribute")?;
+            if !a.is_finite() {
+                return Err(VolError::Parse {
+                    file: file.to_path_buf(),
+                    line: l,
+                    msg: "non-finite region attribute".into(),
+                });
+            }
             a as i64
         } else {
             0
@@ -184,13 +270,20 @@ pub fn parse_ele(
         tets.push(tet);
         refs.push(r);
     }
+    if let Some((l, _)) = recs.next() {
+        return Err(VolError::Parse {
+            file: file.to_path_buf(),
+            line: l,
+            msg: format!("a record after the {n} tets the header announces"),
+        });
+    }
     Ok((tets, refs))
 }
 
-/// Reads `.node` + `.ele` (`path` names either, or their stem).
-pub fn read_tetgen(path: &Path) -> Result<TetMesh, VolError> {
+/// Reads `.node` + `.ele` (`path` names either, or their stem), each at most `limit` bytes.
+pub fn read_tetgen(path: &Path, limit: u64) -> Result<TetMesh, VolError> {
     let (np, ep) = tetgen_paths(path);
-    let read = |p: &Path| super::error::read_text(p);
+    let read = |p: &Path| super::error::read_text(p, limit);
     let (positions, vertex_refs, base) = parse_node(&read(&np)?, &np)?;
     let (tets, tet_refs) = parse_ele(&read(&ep)?, &ep, positions.len(), base)?;
     Ok(TetMesh {
@@ -201,28 +294,22 @@ pub fn read_tetgen(path: &Path) -> Result<TetMesh, VolError> {
     })
 }
 
-/// Writes `.node` + `.ele` (1-based, one boundary marker = the vertex reference, one region
+/// `.node` and `.ele` text (1-based, one boundary marker = the vertex reference, one region
 /// attribute = the tet reference).
-pub fn write_tetgen(path: &Path, mesh: &TetMesh, positions: &[[f64; 3]]) -> Result<(), VolError> {
+pub fn tetgen_text(mesh: &TetMesh, positions: &[[f64; 3]]) -> (String, String) {
     use std::fmt::Write;
-    let (np, ep) = tetgen_paths(path);
-    let mut s = String::new();
-    let _ = writeln!(s, "{} 3 0 1", positions.len());
+    let mut node = String::new();
+    let _ = writeln!(node, "{} 3 0 1", positions.len());
     for (i, p) in positions.iter().enumerate() {
         let r = mesh.vertex_refs.get(i).copied().unwrap_or(0);
-        let _ = writeln!(s, "{} {:?} {:?} {:?} {}", i + 1, p[0], p[1], p[2], r);
+        let _ = writeln!(node, "{} {:?} {:?} {:?} {}", i + 1, p[0], p[1], p[2], r);
     }
-    let io = |p: &Path, source| VolError::Io {
-        path: p.to_path_buf(),
-        source,
-    };
-    crate::mesh::write_atomic(&np, s.as_bytes()).map_err(|e| io(&np, e))?;
-    let mut s = String::new();
-    let _ = writeln!(s, "{} 4 1", mesh.tets.len());
+    let mut ele = String::new();
+    let _ = writeln!(ele, "{} 4 1", mesh.tets.len());
     for (i, t) in mesh.tets.iter().enumerate() {
         let r = mesh.tet_refs.get(i).copied().unwrap_or(0);
         let _ = writeln!(
-            s,
+            ele,
             "{} {} {} {} {} {}",
             i + 1,
             t[0] + 1,
@@ -232,14 +319,23 @@ pub fn write_tetgen(path: &Path, mesh: &TetMesh, positions: &[[f64; 3]]) -> Resu
             r
         );
     }
-    crate::mesh::write_atomic(&ep, s.as_bytes()).map_err(|e| io(&ep, e))
+    (node, ele)
 }
 
-/// Reads a tet mesh by extension: `.mesh` MEDIT, `.node` / `.ele` TetGen.
-pub fn read_any(path: &Path) -> Result<TetMesh, VolError> {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some("node") | Some("ele") => read_tetgen(path),
-        Some("mesh") => super::medit::read_medit(path),
+/// The tet formats by extension: `.mesh` MEDIT, `.node` / `.ele` TetGen.
+enum Format {
+    Medit,
+    TetGen,
+}
+
+fn format_of(path: &Path) -> Result<Format, VolError> {
+    match path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .as_deref()
+    {
+        Some("node") | Some("ele") => Ok(Format::TetGen),
+        Some("mesh") => Ok(Format::Medit),
         _ => Err(VolError::Input(format!(
             "{}: unknown tet mesh format (use .mesh, .node or .ele)",
             path.display()
@@ -247,15 +343,102 @@ pub fn read_any(path: &Path) -> Result<TetMesh, VolError> {
     }
 }
 
-/// Writes a tet mesh by extension (as [`read_any`]).
-pub fn write_any(path: &Path, mesh: &TetMesh, positions: &[[f64; 3]]) -> Result<(), VolError> {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some("node") | Some("ele") => write_tetgen(path, mesh, positions),
-        Some("mesh") => super::medit::write_medit(path, mesh, positions),
-        _ => Err(VolError::Input(format!(
-            "{}: unknown tet mesh format (use .mesh, .node or .ele)",
+/// Reads a tet mesh by extension (`.mesh` MEDIT, `.node` / `.ele` TetGen) with the default
+/// size limit ([`crate::files::DEFAULT_MAX_ELEMENTS`] tets), and checks its structure.
+pub fn read_any(path: &Path) -> Result<TetMesh, VolError> {
+    read_any_with_limit(path, crate::files::DEFAULT_MAX_ELEMENTS)
+}
+
+/// Reads a tet mesh by extension (`.mesh` MEDIT, `.node` / `.ele` TetGen) of at most
+/// `max_tets` tets (and files of at most that many tets' worth of bytes), and checks its
+/// structure ([`TetMesh::check_structure`]).
+pub fn read_any_with_limit(path: &Path, max_tets: usize) -> Result<TetMesh, VolError> {
+    let limit = (max_tets as u64)
+        .saturating_mul(crate::files::BYTES_PER_ELEMENT)
+        .max(1 << 20);
+    let m = match format_of(path)? {
+        Format::TetGen => read_tetgen(path, limit)?,
+        Format::Medit => super::medit::read_medit(path, limit)?,
+    };
+    if m.tets.len() > max_tets {
+        return Err(VolError::Input(format!(
+            "{}: {} tets, more than the limit of {max_tets} (--max-tets)",
+            path.display(),
+            m.tets.len()
+        )));
+    }
+    m.check_structure(path)?;
+    Ok(m)
+}
+
+/// The files a tet mesh output at `path` consists of (TetGen: the `.node` and `.ele` pair).
+pub fn output_files(path: &Path) -> Result<Vec<PathBuf>, VolError> {
+    Ok(match format_of(path)? {
+        Format::TetGen => {
+            let (n, e) = tetgen_paths(path);
+            vec![n, e]
+        }
+        Format::Medit => vec![path.to_path_buf()],
+    })
+}
+
+/// The contents of the files of [`output_files`], in the same order.
+pub fn output_texts(
+    path: &Path,
+    mesh: &TetMesh,
+    positions: &[[f64; 3]],
+) -> Result<Vec<String>, VolError> {
+    if let Some(v) = positions
+        .iter()
+        .position(|p| p.iter().any(|c| !c.is_finite()))
+    {
+        return Err(VolError::BadResult(format!(
+            "{}: vertex {v} of the map is not finite; nothing written",
             path.display()
-        ))),
+        )));
+    }
+    Ok(match format_of(path)? {
+        Format::TetGen => {
+            let (n, e) = tetgen_text(mesh, positions);
+            vec![n, e]
+        }
+        Format::Medit => vec![super::medit::medit_text(mesh, positions)],
+    })
+}
+
+/// Writes a tet mesh (both files of a TetGen pair together, see [`crate::files::Outputs`]),
+/// never over an existing file of another kind.
+pub fn write_any(path: &Path, mesh: &TetMesh, positions: &[[f64; 3]]) -> Result<(), VolError> {
+    let mut outputs = crate::files::Outputs::new();
+    let files = output_files(path)?;
+    for f in &files {
+        outputs.output(f, "tet mesh", &["mesh", "node", "ele"])?;
+    }
+    for (f, t) in files.iter().zip(output_texts(path, mesh, positions)?) {
+        outputs.set(f, t.into_bytes());
+    }
+    outputs.commit()?;
+    Ok(())
+}
+
+/// Parses the contents of [`output_texts`] back (the independent check of what is written).
+pub fn parse_output(path: &Path, texts: &[String]) -> Result<TetMesh, VolError> {
+    match (format_of(path)?, texts) {
+        (Format::TetGen, [n, e]) => {
+            let (np, ep) = tetgen_paths(path);
+            let (positions, vertex_refs, base) = parse_node(n, &np)?;
+            let (tets, tet_refs) = parse_ele(e, &ep, positions.len(), base)?;
+            Ok(TetMesh {
+                positions,
+                tets,
+                vertex_refs,
+                tet_refs,
+            })
+        }
+        (Format::Medit, [m]) => super::medit::parse_medit(m, path),
+        _ => Err(VolError::BadResult(
+            "output texts do not match the format".into(),
+        )),
     }
 }
 

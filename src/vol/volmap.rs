@@ -78,6 +78,76 @@ impl Default for VolmapOptions {
     }
 }
 
+impl VolmapOptions {
+    /// Checks every setting against its meaningful range (the CLI's usage errors, exit 2,
+    /// for hosts too): weights and tolerances positive and finite, λ growth above 1 (else the
+    /// penalty rounds never tighten), iteration caps at least 1 and at most 1e6 (a cap far
+    /// beyond any converging run only turns a stall into a hang).
+    pub fn validate(&self) -> Result<(), VolError> {
+        let bad = |what: &str, value: String, range: &str| {
+            Err(VolError::Input(format!(
+                "volmap option {what} = {value} is outside its range {range}"
+            )))
+        };
+        let pos = |x: f64| x.is_finite() && x > 0.0;
+        for (what, x) in [
+            ("omega", self.omega),
+            ("theta", self.theta),
+            ("lambda0", self.lambda0),
+        ] {
+            if !pos(x) {
+                return bad(what, x.to_string(), "(0, ∞), finite");
+            }
+        }
+        if !(self.lambda_growth.is_finite() && self.lambda_growth > 1.0) {
+            return bad(
+                "lambda_growth",
+                self.lambda_growth.to_string(),
+                "(1, ∞), finite",
+            );
+        }
+        if !(1..=1000).contains(&self.max_rounds) {
+            return bad("max_rounds", self.max_rounds.to_string(), "[1, 1000]");
+        }
+        let newtons = [
+            ("newton", Some(&self.newton)),
+            ("penalty", Some(&self.penalty)),
+            ("post", self.post.as_ref()),
+            ("ball_relax", self.ball_relax.as_ref()),
+        ];
+        for (what, n) in newtons {
+            let Some(n) = n else { continue };
+            if !(1..=1_000_000).contains(&n.max_iters) {
+                return bad(
+                    &format!("{what}.max_iters"),
+                    n.max_iters.to_string(),
+                    "[1, 1e6]",
+                );
+            }
+            if !(pos(n.rel_tol) && n.rel_tol < 1.0) {
+                return bad(&format!("{what}.rel_tol"), n.rel_tol.to_string(), "(0, 1)");
+            }
+            if !(pos(n.cg.tolerance) && n.cg.tolerance < 1.0) {
+                return bad(
+                    &format!("{what}.cg_tol"),
+                    n.cg.tolerance.to_string(),
+                    "(0, 1)",
+                );
+            }
+        }
+        if let Some(u) = &self.untangle {
+            if !(1..=1_000_000).contains(&u.max_outer) || !(1..=1_000_000).contains(&u.max_inner) {
+                return bad(
+                    "untangle iterations",
+                    format!("{} outer, {} inner", u.max_outer, u.max_inner),
+                    "[1, 1e6]",
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
 /// One phase of the run.
 #[derive(Clone, Debug, Serialize)]
 pub struct PhaseReport {
