@@ -47,6 +47,7 @@ impl Error {
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Mesh(_) | Error::Usage(_) => 2,
+            Error::Gpu(crate::gpu::GpuError::NoSuchDevice(_)) => 2,
             Error::Gpu(_) | Error::Solve(_) | Error::Io { .. } => 1,
             Error::NotConverged(_) => 3,
             Error::Approx(e) => e.exit_code(),

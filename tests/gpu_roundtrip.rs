@@ -305,10 +305,10 @@ fn unknown_device_name_lists_the_available_devices() {
         ..ContextDesc::default()
     };
     match Context::new(&desc) {
-        Err(GpuError::NoDevice(msg)) => {
+        Err(GpuError::NoSuchDevice(msg)) => {
             assert!(msg.contains(&real_name), "{msg}");
         }
-        Err(e) => panic!("expected NoDevice, got {e}"),
+        Err(e) => panic!("expected NoSuchDevice, got {e}"),
         Ok(_) => panic!("a device matched a made-up name"),
     }
 }

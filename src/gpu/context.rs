@@ -877,7 +877,7 @@ fn create_device(
                     )))
                 }
                 None => {
-                    return Err(GpuError::NoDevice(format!(
+                    return Err(GpuError::NoSuchDevice(format!(
                     "no device matches {req:?} (set by --device or {DEVICE_ENV}); available: {}",
                     available()
                 )))

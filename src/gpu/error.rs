@@ -23,6 +23,10 @@ pub enum GpuError {
     /// requested name); the message lists what is available.
     #[error("no suitable Vulkan device: {0}")]
     NoDevice(String),
+    /// The device named by `--device` / `FOLDFREE_DEVICE` does not exist: a wrong request
+    /// (exit 2), never a reason to run elsewhere.
+    #[error("no such Vulkan device: {0}")]
+    NoSuchDevice(String),
     /// A requested instance layer is not installed.
     #[error("Vulkan layer {layer} is missing; install it with: apt-get install {package}")]
     MissingLayer {
@@ -80,6 +84,7 @@ impl GpuError {
             GpuError::NoLoader(_)
                 | GpuError::NoDriver(_)
                 | GpuError::NoDevice(_)
+                | GpuError::NoSuchDevice(_)
                 | GpuError::MissingLayer { .. }
         )
     }

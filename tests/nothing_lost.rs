@@ -1,0 +1,806 @@
+//! Nothing lost, nothing silent: one test per finding of the input/output audit, named for it,
+//! through the release binary as a user runs it. Each pins the exit code (the README's table),
+//! that inputs are never changed, and that a failed run leaves no file behind.
+
+#[path = "common/tempdir.rs"]
+mod tempdir;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use tempdir::TempDir;
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+struct Run {
+    code: Option<i32>,
+    stderr: String,
+    what: String,
+}
+
+fn run(dir: &TempDir, args: &[&str]) -> Run {
+    let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .current_dir(&dir.0)
+        .args(args)
+        .output()
+        .expect("run foldfree");
+    Run {
+        code: out.status.code(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+        what: format!("foldfree {}", args.join(" ")),
+    }
+}
+
+impl Run {
+    fn expect(&self, code: i32, needle: &str) -> &Run {
+        assert_eq!(
+            self.code,
+            Some(code),
+            "{}: expected exit {code}\n{}",
+            self.what,
+            self.stderr
+        );
+        assert!(
+            self.stderr.contains(needle),
+            "{}: stderr does not mention {needle:?}:\n{}",
+            self.what,
+            self.stderr
+        );
+        self
+    }
+}
+
+/// A scratch folder holding copies of the named test files.
+fn scratch(test: &str, files: &[&str]) -> TempDir {
+    let dir = TempDir::new(test);
+    for f in files {
+        fs::copy(data(f), dir.join(f)).expect("copy test data");
+    }
+    dir
+}
+
+/// Runs `args` in a scratch folder with `files`, expects `code` and `needle`, and checks that
+/// every input is unchanged and no other file appeared.
+fn refused(test: &str, files: &[&str], args: &[&str], code: i32, needle: &str) {
+    let dir = scratch(test, files);
+    let before: Vec<Vec<u8>> = files
+        .iter()
+        .map(|f| fs::read(dir.join(f)).unwrap())
+        .collect();
+    run(&dir, args).expect(code, needle);
+    for (f, b) in files.iter().zip(&before) {
+        assert_eq!(&fs::read(dir.join(f)).unwrap(), b, "{f} changed");
+    }
+    let expected: std::collections::BTreeSet<String> =
+        files.iter().map(|s| s.to_string()).collect();
+    assert_eq!(dir.entries(), expected, "files appeared or vanished");
+}
+
+const TUTTE: [&str; 4] = ["--init", "tutte", "--solver", "none"];
+
+fn param_args<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+    let mut a = vec!["param", "camel_open.obj", "-o", "out.obj", "-q"];
+    a.extend(TUTTE);
+    a.extend(extra);
+    a
+}
+
+// ------------------------------------------------------------------ inputs overwritten
+
+#[test]
+fn param_report_naming_the_input_is_refused() {
+    let args = param_args(&["--report", "./camel_open.obj"]);
+    refused("rep_in", &["camel_open.obj"], &args, 2, "report");
+}
+
+#[test]
+fn param_picture_naming_the_input_is_refused() {
+    for flag in ["--svg", "--png", "--plot"] {
+        // Same file by identity, whatever the extension check says first.
+        let args = param_args(&[flag, "camel_open.obj"]);
+        refused("pic_in", &["camel_open.obj"], &args, 2, "camel_open.obj");
+    }
+    let dir = scratch("pic_link", &["camel_open.obj"]);
+    fs::hard_link(dir.join("camel_open.obj"), dir.join("link.svg")).unwrap();
+    run(&dir, &param_args(&["--svg", "link.svg"])).expect(2, "refusing to overwrite the input");
+    assert_eq!(
+        fs::read(dir.join("camel_open.obj")).unwrap(),
+        fs::read(data("camel_open.obj")).unwrap()
+    );
+}
+
+#[test]
+fn param_report_naming_the_output_is_refused() {
+    let dir = scratch("rep_out", &["camel_open.obj"]);
+    let mut args = param_args(&[]);
+    args[3] = "out.json";
+    args.extend(["--report", "./out.json"]);
+    run(&dir, &args).expect(2, "out.json");
+    assert!(!dir.join("out.json").exists());
+}
+
+#[test]
+fn approx_output_naming_the_input_by_another_spelling_is_refused() {
+    refused(
+        "approx_in",
+        &["block.obj"],
+        &["approx", "block.obj", "-k", "24", "-q", "-o", "./block.obj"],
+        2,
+        "refusing to overwrite the input",
+    );
+    refused(
+        "approx_rep",
+        &["block.obj"],
+        &[
+            "approx",
+            "block.obj",
+            "-k",
+            "24",
+            "-q",
+            "-o",
+            "o.obj",
+            "--report",
+            "block.obj",
+        ],
+        2,
+        "report",
+    );
+}
+
+#[test]
+fn volmap_output_naming_the_rest_is_refused() {
+    let v = [
+        "volmap",
+        "cube_5tets.mesh",
+        "--target",
+        "ball",
+        "-q",
+        "-o",
+        "./cube_5tets.mesh",
+    ];
+    refused(
+        "vol_in",
+        &["cube_5tets.mesh"],
+        &v,
+        2,
+        "refusing to overwrite the input",
+    );
+    let v = [
+        "volmap",
+        "cube_5tets.mesh",
+        "--target",
+        "ball",
+        "-q",
+        "-o",
+        "o.mesh",
+        "--report",
+        "cube_5tets.mesh",
+    ];
+    refused("vol_rep", &["cube_5tets.mesh"], &v, 2, "report");
+}
+
+#[test]
+fn volmap_tetgen_output_naming_one_file_of_the_input_pair_is_refused() {
+    let dir = TempDir::new("vol_pair");
+    // A TetGen pair written by foldfree itself from the cube.
+    let m = foldfree::vol::read_any(&data("cube_5tets.mesh")).unwrap();
+    foldfree::vol::write_any(&dir.join("a.node"), &m, &m.positions).unwrap();
+    let before = (
+        fs::read(dir.join("a.node")).unwrap(),
+        fs::read(dir.join("a.ele")).unwrap(),
+    );
+    run(
+        &dir,
+        &["volmap", "a.node", "--target", "ball", "-q", "-o", "a.ele"],
+    )
+    .expect(2, "refusing to overwrite the input");
+    assert_eq!(fs::read(dir.join("a.node")).unwrap(), before.0);
+    assert_eq!(fs::read(dir.join("a.ele")).unwrap(), before.1);
+}
+
+#[test]
+fn volmap_constraints_output_naming_the_rest_is_refused() {
+    refused(
+        "volc_in",
+        &["cube_5tets.mesh"],
+        &[
+            "volmap-constraints",
+            "cube_5tets.mesh",
+            "-o",
+            "cube_5tets.mesh",
+        ],
+        2,
+        "refusing to overwrite the input",
+    );
+}
+
+#[test]
+fn write_constraints_naming_the_constraints_input_is_refused() {
+    let dir = scratch("wc_in", &["cube_5tets.mesh"]);
+    run(
+        &dir,
+        &["volmap-constraints", "cube_5tets.mesh", "-o", "c.txt"],
+    )
+    .expect(0, "wrote");
+    let before = fs::read(dir.join("c.txt")).unwrap();
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--constraints",
+            "c.txt",
+            "-q",
+            "-o",
+            "o.mesh",
+            "--write-constraints",
+            "./c.txt",
+        ],
+    )
+    .expect(2, "refusing to overwrite the input");
+    assert_eq!(fs::read(dir.join("c.txt")).unwrap(), before);
+    assert!(!dir.join("o.mesh").exists());
+}
+
+// ------------------------------------------------------------------ the TetGen reader
+
+fn tetgen_pair(dir: &TempDir, node: &str, ele: &str) {
+    fs::write(dir.join("t.node"), node).unwrap();
+    fs::write(dir.join("t.ele"), ele).unwrap();
+}
+
+const NODE: &str = "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n";
+
+#[test]
+fn tetgen_header_count_of_u64_max_is_a_located_error_not_a_panic() {
+    for (node, ele, needle) in [
+        (
+            "18446744073709551615 3 0 0\n1 0 0 0\n",
+            "1 4 0\n1 1 2 3 4\n",
+            "t.node:",
+        ),
+        (NODE, "18446744073709551615 4 0\n1 1 2 3 4\n", "t.ele:"),
+        (
+            "4 3 18446744073709551615 1\n1 0 0 0\n",
+            "1 4 0\n1 1 2 3 4\n",
+            "t.node:1",
+        ),
+        (NODE, "1 4 18446744073709551615\n1 1 2 3 4\n", "t.ele:1"),
+    ] {
+        let dir = TempDir::new("tg_max");
+        tetgen_pair(&dir, node, ele);
+        run(&dir, &["volcheck", "t.node", "--rest", "t.node"]).expect(2, needle);
+    }
+}
+
+#[test]
+fn tetgen_records_must_have_the_fields_their_header_announces() {
+    for (node, ele, needle) in [
+        // 10 nodes per tet announced, 4 given.
+        (
+            NODE,
+            "1 10 0\n1 1 2 3 4\n",
+            "has 5 fields, the header announces 11",
+        ),
+        // A point with a missing coordinate, and one with an extra field.
+        (
+            "2 3 0 0\n1 0 0\n2 1 0 0\n",
+            "1 4 0\n1 1 2 3 4\n",
+            "has 3 fields",
+        ),
+        (NODE, "1 4 0\n1 1 2 3 4 7\n", "has 6 fields"),
+        // Records past the announced count.
+        (
+            NODE,
+            "1 4 0\n1 1 2 3 4\n2 1 2 4 3\n",
+            "a record after the 1 tets",
+        ),
+    ] {
+        let dir = TempDir::new("tg_fields");
+        tetgen_pair(&dir, node, ele);
+        run(&dir, &["volcheck", "t.node", "--rest", "t.node"]).expect(2, needle);
+    }
+}
+
+// ------------------------------------------------------------------ partial outputs
+
+#[test]
+fn a_bad_side_output_is_found_before_the_work_and_nothing_is_written() {
+    for extra in [
+        ["--report", "no/such/dir/r.json"],
+        ["--report", "r.txt"],
+        ["--svg", "no/such/dir/l.svg"],
+    ] {
+        let args = param_args(&extra);
+        refused("side_out", &["camel_open.obj"], &args, 2, extra[1]);
+    }
+    refused(
+        "side_out_vol",
+        &["cube_5tets.mesh"],
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--target",
+            "ball",
+            "-q",
+            "-o",
+            "o.obj",
+        ],
+        2,
+        "o.obj",
+    );
+}
+
+#[test]
+fn a_tetgen_output_pair_is_written_together() {
+    let dir = scratch("pair_out", &["cube_5tets.mesh"]);
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--target",
+            "ball",
+            "-q",
+            "-o",
+            "m.node",
+            "--report",
+            "r.json",
+        ],
+    )
+    .expect(0, "");
+    let e = dir.entries();
+    for f in ["m.node", "m.ele", "r.json"] {
+        assert!(e.contains(f), "{f} missing: {e:?}");
+    }
+    dir.assert_no_temp_files("volmap m.node");
+}
+
+// ------------------------------------------------------------------ resource limits
+
+#[test]
+fn special_files_are_refused_not_read_for_ever() {
+    let dir = TempDir::new("special");
+    for args in [
+        vec!["stats", "/dev/zero"],
+        vec!["param", "/dev/zero", "-o", "o.obj"],
+        vec!["approx", "/dev/zero", "-k", "4", "-o", "o.obj"],
+        vec!["volcheck", "/dev/zero.mesh", "--rest", "/dev/zero.mesh"],
+    ] {
+        let r = run(&dir, &args);
+        assert_eq!(r.code, Some(2), "{}: {}", r.what, r.stderr);
+    }
+    #[cfg(unix)]
+    {
+        // A FIFO with no writer: opening it would block; it is refused at once.
+        let fifo = dir.join("pipe.obj");
+        let ok = Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .is_ok_and(|s| s.success());
+        if ok {
+            run(&dir, &["stats", "pipe.obj"]).expect(2, "not a regular file");
+        }
+    }
+}
+
+#[test]
+fn every_command_has_a_size_limit() {
+    let dir = scratch(
+        "limits",
+        &["camel_open.obj", "cube_5tets.mesh", "block.obj"],
+    );
+    run(&dir, &["stats", "camel_open.obj", "--max-faces", "10"]).expect(2, "limit");
+    run(
+        &dir,
+        &[
+            "param",
+            "camel_open.obj",
+            "-o",
+            "o.obj",
+            "--max-faces",
+            "10",
+        ],
+    )
+    .expect(2, "limit");
+    run(
+        &dir,
+        &[
+            "approx",
+            "block.obj",
+            "-k",
+            "8",
+            "-o",
+            "o.obj",
+            "--max-faces",
+            "10",
+        ],
+    )
+    .expect(2, "limit");
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--target",
+            "ball",
+            "-o",
+            "o.mesh",
+            "--max-tets",
+            "2",
+        ],
+    )
+    .expect(2, "--max-tets");
+    run(
+        &dir,
+        &[
+            "volcheck",
+            "cube_5tets.mesh",
+            "--rest",
+            "cube_5tets.mesh",
+            "--max-tets",
+            "2",
+        ],
+    )
+    .expect(2, "--max-tets");
+    run(
+        &dir,
+        &[
+            "render",
+            "block.obj",
+            "-o",
+            "o.png",
+            "--shade",
+            "normals",
+            "--max-elements",
+            "3",
+        ],
+    )
+    .expect(2, "--max-elements");
+    assert!(!dir.join("o.obj").exists() && !dir.join("o.mesh").exists());
+}
+
+// ------------------------------------------------------------------ option ranges
+
+#[test]
+fn numeric_options_outside_their_range_are_usage_errors() {
+    let dir = scratch(
+        "ranges",
+        &["camel_open.obj", "block.obj", "cube_5tets.mesh"],
+    );
+    for (flag, value) in [
+        ("--newton-iters", "4294967295"),
+        ("--mu", "0"),
+        ("--mu", "NaN"),
+        ("--mu", "inf"),
+        ("--tol-primal", "NaN"),
+        ("--tol-dual", "2"),
+        ("--max-iters", "0"),
+    ] {
+        let r = run(
+            &dir,
+            &["param", "camel_open.obj", "-o", "o.obj", "-q", flag, value],
+        );
+        r.expect(2, "outside its range");
+    }
+    run(
+        &dir,
+        &[
+            "approx",
+            "block.obj",
+            "-k",
+            "8",
+            "-o",
+            "o.obj",
+            "--restarts",
+            "1000000",
+        ],
+    )
+    .expect(2, "[0, 100]");
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--target",
+            "ball",
+            "-o",
+            "o.mesh",
+            "--lambda-growth",
+            "1",
+        ],
+    )
+    .expect(2, "lambda_growth");
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--target",
+            "ball",
+            "-o",
+            "o.mesh",
+            "--cg-tol",
+            "NaN",
+        ],
+    )
+    .expect(2, "cg_tol");
+    assert!(!dir.join("o.obj").exists() && !dir.join("o.mesh").exists());
+}
+
+#[test]
+fn library_option_types_check_their_own_ranges() {
+    let mut a = foldfree::param::admm::AdmmOptions::default();
+    assert!(a.validate().is_ok());
+    a.newton_iters = u32::MAX;
+    assert!(a.validate().is_err());
+    let mut v = foldfree::vol::VolmapOptions::default();
+    assert!(v.validate().is_ok());
+    v.theta = f64::NAN;
+    assert!(v.validate().is_err());
+    let mut o = foldfree::approx::ApproxOptions::new(8);
+    assert!(o.validate().is_ok());
+    o.restarts = 1_000_000;
+    assert!(o.validate().is_err());
+}
+
+// ------------------------------------------------------------------ wrong results, exit 0
+
+#[test]
+fn volmap_on_a_mesh_without_tets_is_bad_input() {
+    let dir = TempDir::new("no_tets");
+    fs::write(
+        dir.join("e.mesh"),
+        "MeshVersionFormatted 1\nDimension 3\nVertices\n1\n0 0 0 0\nTetrahedra\n0\nEnd\n",
+    )
+    .unwrap();
+    run(
+        &dir,
+        &["volmap", "e.mesh", "--target", "ball", "-o", "o.mesh"],
+    )
+    .expect(2, "no tetrahedra");
+    assert!(!dir.join("o.mesh").exists());
+}
+
+#[test]
+fn duplicate_tets_and_repeated_sections_are_bad_input() {
+    let head =
+        "MeshVersionFormatted 1\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n";
+    for (text, needle) in [
+        (
+            format!("{head}Tetrahedra\n2\n1 2 3 4 0\n2 1 4 3 0\nEnd\n"),
+            "duplicate of tet 0",
+        ),
+        (
+            format!("{head}Vertices\n1\n5 5 5 0\nTetrahedra\n1\n1 2 3 4 0\nEnd\n"),
+            "a second Vertices section",
+        ),
+        (
+            format!("{head}Tetrahedra\n1\n1 2 3 3 0\nEnd\n"),
+            "uses vertex 2 twice",
+        ),
+    ] {
+        let dir = TempDir::new("dup_tets");
+        fs::write(dir.join("d.mesh"), text).unwrap();
+        run(&dir, &["volcheck", "d.mesh", "--rest", "d.mesh"]).expect(2, needle);
+    }
+}
+
+#[test]
+fn constraints_the_map_cannot_meet_exit_3() {
+    let dir = scratch("unmet", &["cube_5tets.mesh"]);
+    run(
+        &dir,
+        &[
+            "volmap-constraints",
+            "cube_5tets.mesh",
+            "-o",
+            "c.txt",
+            "--twist",
+            "170",
+        ],
+    )
+    .expect(0, "wrote");
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--constraints",
+            "c.txt",
+            "-q",
+            "-o",
+            "o.mesh",
+        ],
+    )
+    .expect(3, "position constraints NOT met");
+    // Written (fold-free) and the report says so: exit 3 is "written, not the requested map".
+    assert!(dir.join("o.mesh").exists());
+}
+
+#[test]
+fn approx_never_writes_folded_output() {
+    let dir = scratch("approx_k1", &["bunny_npm.obj"]);
+    run(
+        &dir,
+        &[
+            "approx",
+            "bunny_npm.obj",
+            "-k",
+            "1",
+            "-q",
+            "--restarts",
+            "0",
+            "-o",
+            "o.obj",
+            "--report",
+            "r.json",
+        ],
+    )
+    .expect(1, "nothing was written");
+    assert!(!dir.join("o.obj").exists() && !dir.join("r.json").exists());
+}
+
+#[test]
+fn a_named_device_or_validation_never_falls_back_to_the_cpu() {
+    let dir = scratch("device", &["camel_open.obj"]);
+    run(
+        &dir,
+        &[
+            "param",
+            "camel_open.obj",
+            "-o",
+            "o.obj",
+            "-q",
+            "--device",
+            "no-such-gpu-xyz",
+        ],
+    )
+    .expect(2, "no-such-gpu-xyz");
+    // The loader finds no validation layer in an empty layer path.
+    let empty = dir.join("no-layers");
+    fs::create_dir(&empty).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .current_dir(&dir.0)
+        .env("VK_LAYER_PATH", &empty)
+        .args([
+            "param",
+            "camel_open.obj",
+            "-o",
+            "o.obj",
+            "-q",
+            "--validation",
+        ])
+        .output()
+        .unwrap();
+    assert_ne!(
+        out.status.code(),
+        Some(0),
+        "--validation without the layer ran anyway"
+    );
+    assert!(!dir.join("o.obj").exists());
+}
+
+// ------------------------------------------------------------------ scale
+
+/// UVs of `param` on the camel scaled by `s` (its `vt` lines).
+fn camel_uv_at_scale(dir: &TempDir, s: f64, tag: &str) -> Vec<[f64; 2]> {
+    let text = fs::read_to_string(data("camel_open.obj")).unwrap();
+    let mut out = String::new();
+    for l in text.lines() {
+        if let Some(rest) = l.strip_prefix("v ") {
+            let c: Vec<f64> = rest
+                .split_whitespace()
+                .map(|x| x.parse().unwrap())
+                .collect();
+            out.push_str(&format!("v {:e} {:e} {:e}\n", c[0] * s, c[1] * s, c[2] * s));
+        } else {
+            out.push_str(l);
+            out.push('\n');
+        }
+    }
+    let input = format!("{tag}.obj");
+    let output = format!("{tag}.out.obj");
+    fs::write(dir.join(&input), out).unwrap();
+    run(
+        dir,
+        &[
+            "param",
+            &input,
+            "-o",
+            &output,
+            "-q",
+            "--backend",
+            "cpu",
+            "--max-iters",
+            "200",
+        ],
+    )
+    .expect(0, "converged");
+    fs::read_to_string(dir.join(&output))
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.strip_prefix("vt "))
+        .map(|r| {
+            let c: Vec<f64> = r.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            [c[0], c[1]]
+        })
+        .collect()
+}
+
+#[test]
+fn meshes_at_any_scale_give_the_unit_scale_map_scaled() {
+    let dir = TempDir::new("scale");
+    let unit = camel_uv_at_scale(&dir, 1.0, "unit");
+    let size = unit.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
+    for s in [1e-100, 1e100] {
+        let uv = camel_uv_at_scale(&dir, s, &format!("s{s:e}"));
+        assert_eq!(uv.len(), unit.len());
+        let worst = uv
+            .iter()
+            .zip(&unit)
+            .map(|(a, b)| (a[0] / s - b[0]).abs().max((a[1] / s - b[1]).abs()))
+            .fold(0.0f64, f64::max);
+        assert!(
+            worst <= 1e-9 * size,
+            "scale {s:e}: UVs differ by {worst:e} (size {size})"
+        );
+    }
+    // Near the top of the range: valid, not "area inf, below inf".
+    let text = fs::read_to_string(data("block.obj")).unwrap();
+    let big: String = text
+        .lines()
+        .map(|l| match l.strip_prefix("v ") {
+            Some(r) => {
+                let c: Vec<f64> = r.split_whitespace().map(|x| x.parse().unwrap()).collect();
+                format!(
+                    "v {:e} {:e} {:e}\n",
+                    c[0] * 1e308,
+                    c[1] * 1e308,
+                    c[2] * 1e308
+                )
+            }
+            None => format!("{l}\n"),
+        })
+        .collect();
+    fs::write(dir.join("big.obj"), big).unwrap();
+    run(&dir, &["stats", "big.obj"]).expect(0, "");
+}
+
+// ------------------------------------------------------------------ exit codes
+
+#[test]
+fn a_missing_input_is_exit_2_for_every_command() {
+    let dir = TempDir::new("missing");
+    for args in [
+        vec!["stats", "nope.obj"],
+        vec!["param", "nope.obj", "-o", "o.obj"],
+        vec!["approx", "nope.obj", "-k", "4", "-o", "o.obj"],
+        vec!["volmap", "nope.mesh", "--target", "ball", "-o", "o.mesh"],
+        vec!["volcheck", "nope.mesh", "--rest", "nope.mesh"],
+        vec!["volmap-constraints", "nope.mesh", "-o", "c.txt"],
+        vec!["render", "nope.obj", "-o", "o.png"],
+    ] {
+        let r = run(&dir, &args);
+        r.expect(2, "nope.");
+    }
+    let dir = scratch("missing_c", &["cube_5tets.mesh"]);
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--constraints",
+            "nope.txt",
+            "-o",
+            "o.mesh",
+        ],
+    )
+    .expect(2, "nope.txt");
+    assert!(dir.entries().len() == 1);
+}
