@@ -253,7 +253,7 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         if r.run.snapped { " (snapped)" } else { "" },
         r.run.seconds
     );
-    let unmet = q.rho >= job.options.theta;
+    let unmet = !r.constraints_met;
     if let Some(s) = &r.sphere_sliding {
         eprintln!(
             "  {:<20} {:>4} it {:>6} ε   {:>7.2} s  inverted {} → {} (boundary sliding on the sphere)",
@@ -276,7 +276,7 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         // Written (fold-free) but not the requested map: exit 3, as for a parameterization
         // whose stop test was not met.
         return Err(foldfree::Error::NotConverged(format!(
-            "{}: position constraints NOT met (ρ {:.3e} ≥ θ = {:.0e}); the fold-free map was written",
+            "{}: position constraints NOT met (ρ {:.3e}, θ = {:.0e} at unit scale); the fold-free map was written",
             job.output.display(),
             q.rho,
             job.options.theta

@@ -662,6 +662,13 @@ fn a_named_device_or_validation_never_falls_back_to_the_cpu() {
         ],
     )
     .expect(2, "no-such-gpu-xyz");
+    let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .current_dir(&dir.0)
+        .env("FOLDFREE_DEVICE", "no-such-gpu-xyz")
+        .args(["param", "camel_open.obj", "-o", "o.obj", "-q"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "FOLDFREE_DEVICE was ignored");
     // The loader finds no validation layer in an empty layer path.
     let empty = dir.join("no-layers");
     fs::create_dir(&empty).unwrap();
@@ -803,4 +810,50 @@ fn a_missing_input_is_exit_2_for_every_command() {
     )
     .expect(2, "nope.txt");
     assert!(dir.entries().len() == 1);
+}
+
+#[test]
+fn volmap_at_any_scale_gives_the_unit_scale_map_scaled() {
+    let m = foldfree::vol::read_any(&data("cube_5tets.mesh")).unwrap();
+    let mut delta = Vec::new();
+    for s in [1.0, 1e-100, 1e100] {
+        let dir = TempDir::new(&format!("volscale{s:e}"));
+        let p: Vec<[f64; 3]> = m.positions.iter().map(|q| q.map(|c| c * s)).collect();
+        foldfree::vol::write_any(&dir.join("r.mesh"), &m, &p).unwrap();
+        run(
+            &dir,
+            &[
+                "volmap-constraints",
+                "r.mesh",
+                "-o",
+                "c.txt",
+                "--twist",
+                "60",
+            ],
+        )
+        .expect(0, "wrote");
+        run(
+            &dir,
+            &[
+                "volmap",
+                "r.mesh",
+                "--constraints",
+                "c.txt",
+                "-q",
+                "-o",
+                "o.mesh",
+                "--report",
+                "j.json",
+            ],
+        )
+        .expect(0, "");
+        let j: serde_json::Value =
+            serde_json::from_str(&fs::read_to_string(dir.join("j.json")).unwrap()).unwrap();
+        assert_eq!(j["written"]["inverted"], 0, "scale {s:e}");
+        assert_eq!(j["constraints_met"], true, "scale {s:e}");
+        delta.push(j["written"]["delta_t"].as_f64().unwrap());
+    }
+    for d in &delta[1..] {
+        assert!((d - delta[0]).abs() <= 1e-6 * delta[0], "δ_t {delta:?}");
+    }
 }

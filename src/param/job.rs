@@ -121,18 +121,21 @@ fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
         device: job.device.clone(),
         ..ContextDesc::default()
     };
+    let named = job.device.is_some()
+        || std::env::var(crate::gpu::DEVICE_ENV).is_ok_and(|s| !s.trim().is_empty());
     match job.backend {
         BackendChoice::Cpu => Ok(None),
         BackendChoice::Vulkan => Ok(Some(Context::new(&desc)?)),
         BackendChoice::Auto => match Context::new(&desc) {
-            // A device the user named is a request: it runs there (even lavapipe) or fails.
-            Ok(ctx) if job.device.is_some() => Ok(Some(ctx)),
+            // A device the user named (`--device` or the environment) is a request: it runs
+            // there (even lavapipe) or fails.
+            Ok(ctx) if named => Ok(Some(ctx)),
             // A CPU "GPU" (lavapipe) is slower than the native f64 backend on the same cores.
             Ok(ctx) if ctx.device_type() == crate::gpu::vk::PhysicalDeviceType::CPU => Ok(None),
             Ok(ctx) => Ok(Some(ctx)),
             // Falling back to the CPU silently would ignore a named device or the validation
             // the user asked for.
-            Err(e) if e.is_unavailable() && job.device.is_none() && !job.validation => Ok(None),
+            Err(e) if e.is_unavailable() && !named && !job.validation => Ok(None),
             Err(e) => Err(e.into()),
         },
     }

@@ -13,6 +13,7 @@ use super::tetgen::{output_files, output_texts, parse_output, read_any_with_limi
 use super::volmap::{evaluate, volmap, MapQuality, VolmapOptions, VolmapReport};
 use super::{TetMesh, VolError};
 use crate::files::{Outputs, DEFAULT_MAX_ELEMENTS};
+use crate::mesh::Scale;
 
 /// Where the position constraints come from.
 #[derive(Clone, Debug, PartialEq)]
@@ -101,6 +102,9 @@ pub struct VolmapFileReport {
     pub run: VolmapReport,
     /// Re-measured from the written file.
     pub written: MapQuality,
+    /// ρ < θ, judged at the solve's unit scale (see [`run_volmap_job`]): the map is the
+    /// requested one. When false the fold-free map is still written, and the CLI exits 3.
+    pub constraints_met: bool,
 }
 
 /// Reads a rest mesh of at most `max_tets` tets and checks it (structure, orientation, zero
@@ -174,11 +178,25 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     if let Some(p) = &job.write_constraints {
         outputs.output(p, "constraints", &[])?;
     }
-    let rest = read_rest(&job.rest, job.max_tets)?;
-    let init_pos = match &job.init {
-        Some(p) => Some(read_map(&rest, &job.rest, p)?),
+    let rest_file = read_rest(&job.rest, job.max_tets)?;
+    let init_file = match &job.init {
+        Some(p) => Some(read_map(&rest_file, &job.rest, p)?),
         None => None,
     };
+    // The solve runs at unit scale (exactly: a power of two; J, δ_t and every step are
+    // unchanged), so a mesh in nanometres or in light years is the same problem, and θ judges ρ
+    // at that scale. The ball target is the unit sphere of the output's coordinates: there the
+    // rest's size is part of the problem, and nothing is rescaled.
+    let scale = match job.constraints {
+        ConstraintSource::Ball => Scale::default(),
+        _ => Scale::fit(&rest_file.positions),
+    };
+    let scaled = |p: &[[f64; 3]]| -> Vec<[f64; 3]> { p.iter().map(|&q| scale.apply(q)).collect() };
+    let rest = TetMesh {
+        positions: scaled(&rest_file.positions),
+        ..rest_file.clone()
+    };
+    let init_pos = init_file.as_deref().map(scaled);
     let mut sphere_bad = None;
     let mut sliding = None;
     let (init, targets) = match &job.constraints {
@@ -202,7 +220,12 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
             }
         }
         src => {
-            let t = constraints_for(&rest, init_pos.as_deref(), src)?;
+            let mut t = constraints_for(&rest, init_pos.as_deref(), src)?;
+            if matches!(src, ConstraintSource::File(_)) {
+                for (_, p) in &mut t {
+                    *p = scale.apply(*p);
+                }
+            }
             let init = match init_pos {
                 Some(p) => p,
                 None => harmonic_extension(&rest, &rest.positions, &t)?,
@@ -230,12 +253,23 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         bar.set_message(format!("E {e:.6e}"));
     });
     bar.finish_and_clear();
-    let (x, run) = out?;
-    let texts = output_texts(&job.output, &rest, &x)?;
-    // Independent check of what will be written: parsed back from the text.
+    let (x, mut run) = out?;
+    let x: Vec<[f64; 3]> = x.iter().map(|&p| scale.invert(p)).collect();
+    let texts = output_texts(&job.output, &rest_file, &x)?;
+    // Independent check of what will be written: parsed back from the text, judged at the
+    // solve's scale, reported in the file's units (ρ is a squared length).
     let written_mesh = parse_output(&job.output, &texts)?;
-    same_tets(&rest, &job.rest, &written_mesh, &job.output)?;
-    let written = evaluate(&rest, &written_mesh.positions, &targets);
+    same_tets(&rest_file, &job.rest, &written_mesh, &job.output)?;
+    let mut written = evaluate(&rest, &scaled(&written_mesh.positions), &targets);
+    let constraints_met = written.rho < job.options.theta;
+    let area = |r: f64| scale.length(scale.length(r));
+    written.rho = area(written.rho);
+    run.quality.rho = area(run.quality.rho);
+    for p in &mut run.phases {
+        p.rho = area(p.rho);
+    }
+    let targets: Vec<(u32, [f64; 3])> =
+        targets.iter().map(|&(v, p)| (v, scale.invert(p))).collect();
     if written.inverted > 0 || !written.delta_t.is_finite() {
         return Err(VolError::BadResult(format!(
             "{}: the map has {} inverted tet(s) (δ_t {}); nothing was written",
@@ -260,6 +294,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         sphere_sliding: sliding,
         run,
         written,
+        constraints_met,
     };
     if let Some(p) = &job.write_constraints {
         let header = format!(
