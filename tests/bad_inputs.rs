@@ -192,6 +192,19 @@ const CASES: &[Case] = &[
     ),
     bad("inverted_rest_tet.mesh", "rest tet 0 is inverted"),
     bad("zero_volume_tet.mesh", "rest tet 0 has zero volume"),
+    // TetGen pairs: each file of a pair names the pair, so both rows give the same error.
+    bad("tetgen_count_u64_max.node", "points announced, 1 found"),
+    bad("tetgen_count_u64_max.ele", "points announced, 1 found"),
+    bad(
+        "tetgen_ten_nodes_four_given.node",
+        "a tet has 5 fields, the header announces 11",
+    ),
+    bad(
+        "tetgen_ten_nodes_four_given.ele",
+        "a tet has 5 fields, the header announces 11",
+    ),
+    bad("tetgen_attribute_count_overflow.node", "overflow"),
+    bad("tetgen_attribute_count_overflow.ele", "overflow"),
     not_disk("two_disjoint_disks.obj"),
     not_disk("closed_tetrahedron.obj"),
     valid("very_long_line.obj"),
@@ -302,7 +315,12 @@ fn error_line_problems(run: &Run, file: &Path, fragment: &str) -> Vec<String> {
         ));
     }
     let first = lines.first().copied().unwrap_or("");
-    let prefix = format!("foldfree: error: {}", file.display());
+    // A TetGen pair's error names the file of the pair where it is: match the common stem.
+    let named = match file.extension().and_then(|e| e.to_str()) {
+        Some("node" | "ele") => file.with_extension(""),
+        _ => file.to_path_buf(),
+    };
+    let prefix = format!("foldfree: error: {}", named.display());
     if !first.starts_with(&prefix) {
         problems.push(format!("stderr does not begin with {prefix:?}"));
     }
@@ -361,6 +379,14 @@ fn atlas_problems(out: &Path) -> Vec<String> {
     }
 }
 
+/// Tet mesh formats: MEDIT `.mesh` and TetGen `.node` / `.ele`.
+fn is_tet(path: &Path) -> bool {
+    matches!(
+        path.extension().and_then(|e| e.to_str()),
+        Some("mesh" | "node" | "ele")
+    )
+}
+
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Cmd {
     Param,
@@ -371,7 +397,7 @@ enum Cmd {
 /// tet mesh (`.mesh`) `foldfree volmap INPUT --init INPUT --fix-boundary -o OUT` or
 /// `foldfree volcheck INPUT --rest INPUT`.
 fn run_cmd(cmd: Cmd, input: &Path, out: &Path) -> Result<Run, String> {
-    if input.extension().is_some_and(|e| e == "mesh") {
+    if is_tet(input) {
         return match cmd {
             Cmd::Param => run_foldfree(&[
                 Path::new("volmap"),
@@ -405,7 +431,7 @@ fn run_cmd(cmd: Cmd, input: &Path, out: &Path) -> Result<Run, String> {
 fn check(cmd: Cmd, file: &str, expect: Expect, dir: &TempDir) -> Vec<String> {
     let input = bad_dir().join(file);
     // The output's extension is checked before the input is read: a tet map is a `.mesh`.
-    let ext = if file.ends_with(".mesh") {
+    let ext = if is_tet(Path::new(file)) {
         "mesh"
     } else {
         "obj"

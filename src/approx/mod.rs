@@ -351,7 +351,7 @@ impl ApproxOutput {
         }
         Err(ApproxError::Folded(format!(
             "the best of {} run(s) at K = {} has {} flipped and {} degenerate face(s); nothing \
-             was written (a larger K, another --seed or more --restarts may avoid them)",
+             was written (another K, --seed or more --restarts may avoid them)",
             r.runs, r.k_requested, r.flipped_faces, r.degenerate_faces
         )))
     }

@@ -106,15 +106,6 @@ impl Outputs {
         if path.file_name().is_none() {
             return Err(bad("not a file name".into()));
         }
-        if !extensions.is_empty() {
-            let ext = path
-                .extension()
-                .map(|e| e.to_string_lossy().to_ascii_lowercase());
-            if !ext.as_deref().is_some_and(|e| extensions.contains(&e)) {
-                let list: Vec<String> = extensions.iter().map(|e| format!(".{e}")).collect();
-                return Err(bad(format!("the extension must be {}", list.join(" or "))));
-            }
-        }
         let dir = folder_of(path);
         if !dir.is_dir() {
             return Err(bad(format!("the folder {} does not exist", dir.display())));
@@ -129,14 +120,6 @@ impl Outputs {
                 return Err(bad("it exists and is not a regular file".into()));
             }
         }
-        // Writable: make and remove an empty file where the temporary will go.
-        let probe = temp_beside(path, "probe");
-        std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&probe)
-            .map_err(|e| bad(format!("the folder is not writable ({e})")))?;
-        let _ = std::fs::remove_file(&probe);
         let id = identity(path).ok_or_else(|| bad("cannot resolve the path".into()))?;
         if let Some((p, _)) = self.inputs.iter().find(|(_, i)| *i == id) {
             return Err(FileError::SameFile {
@@ -152,6 +135,23 @@ impl Outputs {
                 other: format!("the {} {}", o.what, o.path.display()),
             });
         }
+        if !extensions.is_empty() {
+            let ext = path
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase());
+            if !ext.as_deref().is_some_and(|e| extensions.contains(&e)) {
+                let list: Vec<String> = extensions.iter().map(|e| format!(".{e}")).collect();
+                return Err(bad(format!("the extension must be {}", list.join(" or "))));
+            }
+        }
+        // Writable: make and remove an empty file where the temporary will go.
+        let probe = temp_beside(path, "probe");
+        std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&probe)
+            .map_err(|e| bad(format!("the folder is not writable ({e})")))?;
+        let _ = std::fs::remove_file(&probe);
         self.planned.push(Planned {
             path: path.to_path_buf(),
             what: what.to_string(),
@@ -270,7 +270,7 @@ mod tests {
         o.output(&d.join("out.obj"), "map", &["obj"]).unwrap();
         assert!(matches!(
             o.output(&d.join("out.obj"), "report", &["json"]),
-            Err(FileError::BadOutput { .. })
+            Err(FileError::SameFile { .. })
         ));
         assert!(matches!(
             o.output(&d.join("./out.obj"), "picture", &[]),
