@@ -342,10 +342,22 @@ pub struct ApproxOutput {
 }
 
 impl ApproxOutput {
-    /// The output's contract: no face flipped against its region's plane and none degenerate.
+    /// The output's contract: finite, no face flipped against its region's plane and none
+    /// degenerate.
     /// A result that breaks it is not written (exit 1), with the counts and what to try.
     pub fn check_fold_free(&self) -> Result<(), ApproxError> {
         let r = &self.report;
+        let finite = |p: &V3| p.iter().all(|c| c.is_finite());
+        if let Some(v) = self.positions.iter().position(|p| !finite(p)) {
+            return Err(ApproxError::Folded(format!(
+                "output vertex {v} is not finite; nothing was written"
+            )));
+        }
+        if !self.polygons.positions.iter().all(finite) {
+            return Err(ApproxError::Folded(
+                "a polygon corner is not finite; nothing was written".into(),
+            ));
+        }
         if r.flipped_faces + r.degenerate_faces == 0 {
             return Ok(());
         }
