@@ -16,6 +16,9 @@ pub struct ParamReport {
     pub interior_edges: usize,
     pub boundary_loops: usize,
     pub unreferenced_vertices: usize,
+    /// Pinched (non-manifold) vertices of the input, each split into one vertex per fan for the
+    /// map: the `vt` of the sheets that touched there are separate.
+    pub pinched_vertices_split: usize,
     pub flips: usize,
     pub delta_con_mean: f64,
     pub delta_con_area_mean: f64,

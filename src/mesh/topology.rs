@@ -161,7 +161,18 @@ impl Topology {
         self.fan_count_with(v, &mut Vec::new())
     }
 
-    /// `fan_count` with a reusable union-find buffer, indexed by position in `vertex_faces(v)`.
+    /// The fans of `v`: for each face of [`Topology::vertex_faces`]`(v)`, the position in that
+    /// list of the first face of its fan (faces are in one fan when they share an edge at `v`).
+    pub fn fans(&self, v: u32) -> Vec<u32> {
+        let mut parent = Vec::new();
+        self.fan_count_with(v, &mut parent);
+        (0..parent.len() as u32)
+            .map(|i| find(&mut parent, i))
+            .collect()
+    }
+
+    /// `fan_count` with a reusable union-find buffer, indexed by position in `vertex_faces(v)`
+    /// (left holding the fans: the smallest position is each fan's root).
     fn fan_count_with(&self, v: u32, parent: &mut Vec<u32>) -> usize {
         let faces = self.vertex_faces(v);
         parent.clear();
@@ -525,4 +536,39 @@ fn boundary_loops(mesh: &TriMesh, topo: &Topology) -> Vec<Vec<u32>> {
     }
     loops.sort_by_key(|lp| std::cmp::Reverse(lp.len()));
     loops
+}
+
+/// The mesh with every pinched vertex split into one vertex per fan (the first fan keeps the
+/// vertex, each other fan gets a copy at the same position, appended in order), faces in the
+/// same order. A pinch point is where separate sheets of surface touch; a UV map has no reason
+/// to keep them together, and after the split every vertex is manifold, so the mesh can be
+/// parameterized like any other (the seams of the split are where the sheets touched).
+pub fn split_pinched(mesh: &TriMesh, topo: &Topology) -> TriMesh {
+    let mut out = mesh.clone();
+    for &v in &topo.nonmanifold_vertices {
+        let faces = topo.vertex_faces(v);
+        let fans = topo.fans(v);
+        let mut copy_of_root: Vec<(u32, u32)> = Vec::new();
+        for (i, &f) in faces.iter().enumerate() {
+            let root = fans[i];
+            if root == fans[0] {
+                continue;
+            }
+            let nv = match copy_of_root.iter().find(|(r, _)| *r == root) {
+                Some(&(_, nv)) => nv,
+                None => {
+                    let nv = out.positions.len() as u32;
+                    out.positions.push(mesh.positions[v as usize]);
+                    copy_of_root.push((root, nv));
+                    nv
+                }
+            };
+            for c in &mut out.faces[f as usize] {
+                if *c == v {
+                    *c = nv;
+                }
+            }
+        }
+    }
+    out
 }

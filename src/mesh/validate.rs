@@ -12,6 +12,9 @@ pub struct ValidateOptions {
     /// A face is degenerate when its area ≤ `degenerate_rel_tol` × (bounding-box diagonal)²;
     /// relative, so the test does not depend on the file's units.
     pub degenerate_rel_tol: f64,
+    /// Accept pinched (non-manifold) vertices, for a caller that splits them
+    /// ([`crate::mesh::topology::split_pinched`]); every other check still applies.
+    pub allow_pinched_vertices: bool,
     /// Refuse meshes with more faces than this, and files larger than an OBJ of that many
     /// faces (a memory / time guard; `None`: no limit).
     pub max_faces: Option<usize>,
@@ -21,6 +24,7 @@ impl Default for ValidateOptions {
     fn default() -> Self {
         ValidateOptions {
             degenerate_rel_tol: 1e-12,
+            allow_pinched_vertices: false,
             max_faces: Some(crate::files::DEFAULT_MAX_ELEMENTS),
         }
     }
@@ -199,7 +203,11 @@ pub fn validate_with_topology(
     // Non-manifold edges (and, as a precondition, the checks above) are the topology's errors.
     let topo = Topology::build(mesh, file)?;
 
-    if let Some(&v) = topo.nonmanifold_vertices.first() {
+    if let Some(&v) = topo
+        .nonmanifold_vertices
+        .first()
+        .filter(|_| !opts.allow_pinched_vertices)
+    {
         return Err(MeshError::NonManifoldVertex {
             file: file.to_path_buf(),
             vertex: v as usize,

@@ -93,7 +93,12 @@ impl ParamJob {
             profile: false,
             energy: None,
             admm: AdmmOptions::default(),
-            validate: mesh::validate::ValidateOptions::default(),
+            // Pinched vertices are split into one per fan: a UV map has no reason to keep
+            // touching sheets together.
+            validate: mesh::validate::ValidateOptions {
+                allow_pinched_vertices: true,
+                ..Default::default()
+            },
             cut: CutMode::Auto,
             cut_options: Default::default(),
             pack: Default::default(),
@@ -156,27 +161,32 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     }
     job.images.plan(&mut outputs)?;
     let (file_mesh, topo, vreport) = mesh::load(&job.input, &job.validate)?;
+    let pinched = topo.nonmanifold_vertices.len();
+    let (work, topo) = if pinched == 0 {
+        (file_mesh.clone(), topo)
+    } else {
+        let split = mesh::topology::split_pinched(&file_mesh, &topo);
+        let t = mesh::Topology::build(&split, &job.input)?;
+        (split, t)
+    };
     if job.cut == CutMode::Never || (job.cut == CutMode::Auto && topo.is_disk()) {
         topo.require_disk(&job.input)?;
     }
     // Every solver works at unit scale; UVs are scale-free, the OBJ keeps the file's `v`.
     let scale = Scale::fit(
-        file_mesh
-            .faces
+        work.faces
             .iter()
             .flatten()
-            .map(|&v| &file_mesh.positions[v as usize]),
+            .map(|&v| &work.positions[v as usize]),
     );
     let mesh = TriMesh {
-        positions: file_mesh
-            .positions
-            .iter()
-            .map(|&p| scale.apply(p))
-            .collect(),
-        faces: file_mesh.faces.clone(),
+        positions: work.positions.iter().map(|&p| scale.apply(p)).collect(),
+        faces: work.faces,
     };
     let t_load = t0.elapsed().as_secs_f64();
     let mut out = solve(job, mesh, &topo, &vreport, t0, t_load, progress)?;
+    out.report.vertices = file_mesh.positions.len();
+    out.report.pinched_vertices_split = pinched;
     // Pictures from the normalised mesh and its map (distortion colours compare the two).
     job.images
         .render(&out.mesh, &out.uv, &out.report.history, &mut outputs)?;
