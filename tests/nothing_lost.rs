@@ -81,6 +81,13 @@ fn refused(test: &str, files: &[&str], args: &[&str], code: i32, needle: &str) {
     assert_eq!(dir.entries(), expected, "files appeared or vanished");
 }
 
+/// `foldfree volmap REST --target ball` plus `extra`.
+fn ball<'a>(rest: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut a = vec!["volmap", rest, "--target", "ball"];
+    a.extend(extra);
+    a
+}
+
 const TUTTE: [&str; 4] = ["--init", "tutte", "--solver", "none"];
 
 fn param_args<'a>(extra: &[&'a str]) -> Vec<&'a str> {
@@ -194,11 +201,7 @@ fn volmap_tetgen_output_naming_one_file_of_the_input_pair_is_refused() {
         fs::read(dir.join("a.node")).unwrap(),
         fs::read(dir.join("a.ele")).unwrap(),
     );
-    run(
-        &dir,
-        &["volmap", "a.node", "--target", "ball", "-q", "-o", "a.ele"],
-    )
-    .expect(2, "refusing to overwrite the input");
+    run(&dir, &ball("a.node", &["-q", "-o", "a.ele"])).expect(2, "refusing to overwrite the input");
     assert_eq!(fs::read(dir.join("a.node")).unwrap(), before.0);
     assert_eq!(fs::read(dir.join("a.ele")).unwrap(), before.1);
 }
@@ -322,15 +325,7 @@ fn a_bad_side_output_is_found_before_the_work_and_nothing_is_written() {
     refused(
         "side_out_vol",
         &["cube_5tets.mesh"],
-        &[
-            "volmap",
-            "cube_5tets.mesh",
-            "--target",
-            "ball",
-            "-q",
-            "-o",
-            "o.obj",
-        ],
+        &ball("cube_5tets.mesh", &["-q", "-o", "o.obj"]),
         2,
         "o.obj",
     );
@@ -341,17 +336,10 @@ fn a_tetgen_output_pair_is_written_together() {
     let dir = scratch("pair_out", &["cube_5tets.mesh"]);
     run(
         &dir,
-        &[
-            "volmap",
+        &ball(
             "cube_5tets.mesh",
-            "--target",
-            "ball",
-            "-q",
-            "-o",
-            "m.node",
-            "--report",
-            "r.json",
-        ],
+            &["-q", "-o", "m.node", "--report", "r.json"],
+        ),
     )
     .expect(0, "");
     let e = dir.entries();
@@ -424,16 +412,7 @@ fn every_command_has_a_size_limit() {
     .expect(2, "limit");
     run(
         &dir,
-        &[
-            "volmap",
-            "cube_5tets.mesh",
-            "--target",
-            "ball",
-            "-o",
-            "o.mesh",
-            "--max-tets",
-            "2",
-        ],
+        &ball("cube_5tets.mesh", &["-o", "o.mesh", "--max-tets", "2"]),
     )
     .expect(2, "--max-tets");
     run(
@@ -504,30 +483,12 @@ fn numeric_options_outside_their_range_are_usage_errors() {
     .expect(2, "[0, 100]");
     run(
         &dir,
-        &[
-            "volmap",
-            "cube_5tets.mesh",
-            "--target",
-            "ball",
-            "-o",
-            "o.mesh",
-            "--lambda-growth",
-            "1",
-        ],
+        &ball("cube_5tets.mesh", &["-o", "o.mesh", "--lambda-growth", "1"]),
     )
     .expect(2, "lambda_growth");
     run(
         &dir,
-        &[
-            "volmap",
-            "cube_5tets.mesh",
-            "--target",
-            "ball",
-            "-o",
-            "o.mesh",
-            "--cg-tol",
-            "NaN",
-        ],
+        &ball("cube_5tets.mesh", &["-o", "o.mesh", "--cg-tol", "NaN"]),
     )
     .expect(2, "cg_tol");
     assert!(!dir.join("o.obj").exists() && !dir.join("o.mesh").exists());
@@ -559,11 +520,7 @@ fn volmap_on_a_mesh_without_tets_is_bad_input() {
         "MeshVersionFormatted 1\nDimension 3\nVertices\n1\n0 0 0 0\nTetrahedra\n0\nEnd\n",
     )
     .unwrap();
-    run(
-        &dir,
-        &["volmap", "e.mesh", "--target", "ball", "-o", "o.mesh"],
-    )
-    .expect(2, "no tetrahedra");
+    run(&dir, &ball("e.mesh", &["-o", "o.mesh"])).expect(2, "no tetrahedra");
     assert!(!dir.join("o.mesh").exists());
 }
 
