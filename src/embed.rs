@@ -368,8 +368,14 @@ impl Engine {
         };
         let (_report, topo) = mesh::validate::validate_with_topology(&mesh, file, &opts.validate)?;
         topo.require_disk(file)?;
+        // Solved at unit scale and mapped back exactly (see `mesh::Scale`), as `param` does.
+        let scale = mesh::Scale::fit(faces.iter().flatten().map(|&v| &positions[v as usize]));
+        let unit = TriMesh {
+            positions: positions.iter().map(|&p| scale.apply(p)).collect(),
+            faces: mesh.faces,
+        };
         let map = crate::param::compute_map(
-            &mesh,
+            &unit,
             &topo,
             opts.init,
             SolverChoice::Admm,
@@ -378,7 +384,11 @@ impl Engine {
             false,
             &mut |_| {},
         )?;
-        Ok(map.uv)
+        Ok(map
+            .uv
+            .iter()
+            .map(|t| [scale.length(t[0]), scale.length(t[1])])
+            .collect())
     }
 
     /// Reads a mesh out of the host's buffers (see [`MeshBuffers`]): one gather kernel per

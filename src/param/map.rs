@@ -168,7 +168,8 @@ fn tutte_map(
 /// Tutte safety net when the start map folds, ADMM on `ctx` (Vulkan) or on the CPU with the
 /// hand-off to the global solver (module docs), and the checks that keep a flipped or
 /// non-finite map from ever being returned. With a context, any validation message it collected
-/// fails the run.
+/// fails the run. The entry points ([`crate::param::run_param`], the embedding engine) pass the
+/// mesh at unit scale ([`crate::mesh::Scale`]) and map the result back.
 #[allow(clippy::too_many_arguments)]
 pub fn compute_map(
     mesh: &TriMesh,
