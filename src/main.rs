@@ -68,6 +68,7 @@ enum Command {
         out_dir: PathBuf,
     },
     /// Foldover-free volumetric map of a tet mesh (Xu & Liu 2022).
+    #[command(after_help = VOLMAP_AFTER_HELP)]
     Volmap(Box<VolmapArgs>),
     /// Write a constraints file (`vertex x y z`) twisting part of a tet mesh's boundary.
     VolmapConstraints(VolConstraintArgs),
@@ -1172,6 +1173,14 @@ Exit codes:
      the message and the report's `stop` say how far from it the run was
   2  bad input or usage (nothing written)
   1  anything else: Vulkan failure, I/O (nothing written)";
+
+/// `foldfree volmap --help`: the exit codes.
+const VOLMAP_AFTER_HELP: &str = "\
+Exit codes:
+  0  a fold-free map meeting the constraints (ρ < θ) was written
+  3  a fold-free map was written, but the constraints are not met (the message gives ρ)
+  2  bad input or usage, found before any work (nothing written)
+  1  anything else: no fold-free map found, I/O (nothing written)";
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
