@@ -369,11 +369,7 @@ impl Engine {
         let (_report, topo) = mesh::validate::validate_with_topology(&mesh, file, &opts.validate)?;
         topo.require_disk(file)?;
         // Solved at unit scale and mapped back exactly (see `mesh::Scale`), as `param` does.
-        let scale = mesh::Scale::fit(faces.iter().flatten().map(|&v| &positions[v as usize]));
-        let unit = TriMesh {
-            positions: positions.iter().map(|&p| scale.apply(p)).collect(),
-            faces: mesh.faces,
-        };
+        let (scale, unit) = mesh::Scale::normalized(&mesh);
         let map = crate::param::compute_map(
             &unit,
             &topo,

@@ -62,9 +62,10 @@ pub enum ApproxError {
     BadInput(String),
     #[error("approx: {0}")]
     Solve(#[from] SolveError),
-    /// The result folds: it breaks the output's contract and is not written.
+    /// The result breaks the output's contract (folded, degenerate or non-finite faces); it
+    /// is not written.
     #[error("approx: {0}")]
-    Folded(String),
+    BadOutput(String),
 }
 
 impl ApproxError {
@@ -72,7 +73,7 @@ impl ApproxError {
     pub fn exit_code(&self) -> i32 {
         match self {
             ApproxError::Mesh(_) | ApproxError::BadInput(_) => 2,
-            ApproxError::Solve(_) | ApproxError::Folded(_) => 1,
+            ApproxError::Solve(_) | ApproxError::BadOutput(_) => 1,
         }
     }
 }
@@ -349,19 +350,19 @@ impl ApproxOutput {
         let r = &self.report;
         let finite = |p: &V3| p.iter().all(|c| c.is_finite());
         if let Some(v) = self.positions.iter().position(|p| !finite(p)) {
-            return Err(ApproxError::Folded(format!(
+            return Err(ApproxError::BadOutput(format!(
                 "output vertex {v} is not finite; nothing was written"
             )));
         }
         if !self.polygons.positions.iter().all(finite) {
-            return Err(ApproxError::Folded(
+            return Err(ApproxError::BadOutput(
                 "a polygon corner is not finite; nothing was written".into(),
             ));
         }
         if r.flipped_faces + r.degenerate_faces == 0 {
             return Ok(());
         }
-        Err(ApproxError::Folded(format!(
+        Err(ApproxError::BadOutput(format!(
             "the best of {} run(s) at K = {} has {} flipped and {} degenerate face(s); nothing \
              was written (another K, --seed or more --restarts may avoid them)",
             r.runs, r.k_requested, r.flipped_faces, r.degenerate_faces
@@ -387,16 +388,7 @@ pub fn approximate(
 ) -> Result<ApproxOutput, ApproxError> {
     opts.validate()?;
     // Work at unit scale (exactly: a power of two), report and return in the file's units.
-    let scale = crate::mesh::Scale::fit(
-        mesh.faces
-            .iter()
-            .flatten()
-            .map(|&v| &mesh.positions[v as usize]),
-    );
-    let normalized = TriMesh {
-        positions: mesh.positions.iter().map(|&p| scale.apply(p)).collect(),
-        faces: mesh.faces.clone(),
-    };
+    let (scale, normalized) = crate::mesh::Scale::normalized(mesh);
     let mut best = best_run(&normalized, topo, opts, progress)?;
     for p in best
         .positions

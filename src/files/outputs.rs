@@ -174,11 +174,6 @@ impl Outputs {
         o.bytes = Some(bytes);
     }
 
-    /// The planned outputs, in order.
-    pub fn paths(&self) -> impl Iterator<Item = &Path> {
-        self.planned.iter().map(|o| o.path.as_path())
-    }
-
     /// Writes every planned output that has content: each to a temporary beside it (synced),
     /// then renames them all into place. On failure the temporaries are removed and the
     /// targets keep their old content (a rename failing after others succeeded, which needs

@@ -36,6 +36,22 @@ impl Scale {
         }
     }
 
+    /// The scale of the vertices `mesh`'s faces use (a stray unused vertex does not set it) and
+    /// the mesh at that scale: what every entry point (`param`, `approx`, embedding) solves.
+    pub fn normalized(mesh: &super::TriMesh) -> (Scale, super::TriMesh) {
+        let scale = Scale::fit(
+            mesh.faces
+                .iter()
+                .flatten()
+                .map(|&v| &mesh.positions[v as usize]),
+        );
+        let unit = super::TriMesh {
+            positions: mesh.positions.iter().map(|&p| scale.apply(p)).collect(),
+            faces: mesh.faces.clone(),
+        };
+        (scale, unit)
+    }
+
     /// File coordinates → normalised (every coordinate in [−1, 1]; [−2, 2] above 2^1023).
     pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
         p.map(|c| c / self.factor)

@@ -142,12 +142,12 @@ pub fn validate_with_topology(
             .flatten()
             .map(|&v| &mesh.positions[v as usize]),
     );
-    let normalized: Vec<[f64; 3]> = mesh.positions.iter().map(|&p| sim.apply(p)).collect();
+    let at = |v: u32| sim.apply(mesh.positions[v as usize]);
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for tri in &mesh.faces {
         for &v in tri {
-            let p = normalized[v as usize];
+            let p = at(v);
             for d in 0..3 {
                 lo[d] = lo[d].min(p[d]);
                 hi[d] = hi[d].max(p[d]);
@@ -158,7 +158,7 @@ pub fn validate_with_topology(
     let threshold = opts.degenerate_rel_tol * diagonal * diagonal;
     let mut min_area = f64::INFINITY;
     for (f, tri) in mesh.faces.iter().enumerate() {
-        let area = face_area(&normalized, tri);
+        let area = face_area(tri.map(at));
         if area <= threshold || area.is_nan() {
             return Err(MeshError::Degenerate {
                 file: file.to_path_buf(),
@@ -172,31 +172,11 @@ pub fn validate_with_topology(
     let bbox_diagonal = sim.length(diagonal);
     let min_face_area = sim.length(sim.length(min_area));
 
-    // Duplicates: sort faces by their sorted vertex triple; report the duplicate with the
-    // smallest face index, naming the first face with the same vertices.
-    let mut keyed: Vec<([u32; 3], u32)> = mesh
-        .faces
-        .iter()
-        .enumerate()
-        .map(|(f, tri)| {
-            let mut key = *tri;
-            key.sort_unstable();
-            (key, f as u32)
-        })
-        .collect();
-    keyed.sort_unstable();
-    let duplicate = keyed
-        .windows(2)
-        .filter(|w| w[0].0 == w[1].0)
-        .map(|w| w[1])
-        .min_by_key(|&(_, f)| f);
-    if let Some((key, face)) = duplicate {
-        // Runs of equal keys are sorted by face index, so the run's first entry is the earliest copy.
-        let other = keyed[keyed.partition_point(|(k, _)| *k < key)].1;
+    if let Some((other, face)) = first_duplicate(&mesh.faces) {
         return Err(MeshError::DuplicateFace {
             file: file.to_path_buf(),
-            face: face as usize,
-            other: other as usize,
+            face,
+            other,
         });
     }
 
@@ -238,9 +218,31 @@ pub fn validate_with_topology(
     Ok((report, topo))
 }
 
+/// The duplicate cell (same vertex set, any order) with the smallest index and the first cell
+/// it copies, as `(first, duplicate)`: cells sorted by their sorted vertices, so copies are
+/// adjacent and each run of copies is in index order. Faces here, tets in `vol::tet`.
+pub(crate) fn first_duplicate<const N: usize>(cells: &[[u32; N]]) -> Option<(usize, usize)> {
+    let mut keyed: Vec<([u32; N], usize)> = cells
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let mut key = *c;
+            key.sort_unstable();
+            (key, i)
+        })
+        .collect();
+    keyed.sort_unstable();
+    let (key, dup) = keyed
+        .windows(2)
+        .filter(|w| w[0].0 == w[1].0)
+        .map(|w| w[1])
+        .min_by_key(|&(_, i)| i)?;
+    let first = keyed[keyed.partition_point(|(k, _)| *k < key)].1;
+    Some((first, dup))
+}
+
 /// ½|(p1−p0)×(p2−p0)|; indices already checked.
-fn face_area(positions: &[[f64; 3]], tri: &[u32; 3]) -> f64 {
-    let [p0, p1, p2] = tri.map(|v| positions[v as usize]);
+fn face_area([p0, p1, p2]: [[f64; 3]; 3]) -> f64 {
     let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
     let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
     let n = [

@@ -162,27 +162,16 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     job.images.plan(&mut outputs)?;
     let (file_mesh, topo, vreport) = mesh::load(&job.input, &job.validate)?;
     let pinched = topo.nonmanifold_vertices.len();
-    let (work, topo) = if pinched == 0 {
-        (file_mesh.clone(), topo)
-    } else {
-        let split = mesh::topology::split_pinched(&file_mesh, &topo);
-        let t = mesh::Topology::build(&split, &job.input)?;
-        (split, t)
+    let split = (pinched > 0).then(|| mesh::topology::split_pinched(&file_mesh, &topo));
+    let topo = match &split {
+        Some(m) => mesh::Topology::build(m, &job.input)?,
+        None => topo,
     };
     if job.cut == CutMode::Never || (job.cut == CutMode::Auto && topo.is_disk()) {
         topo.require_disk(&job.input)?;
     }
-    // Every solver works at unit scale; UVs are scale-free, the OBJ keeps the file's `v`.
-    let scale = Scale::fit(
-        work.faces
-            .iter()
-            .flatten()
-            .map(|&v| &work.positions[v as usize]),
-    );
-    let mesh = TriMesh {
-        positions: work.positions.iter().map(|&p| scale.apply(p)).collect(),
-        faces: work.faces,
-    };
+    // Every solver works at unit scale; the OBJ keeps the file's `v`.
+    let (scale, mesh) = Scale::normalized(split.as_ref().unwrap_or(&file_mesh));
     let t_load = t0.elapsed().as_secs_f64();
     let mut out = solve(job, mesh, &topo, &vreport, t0, t_load, progress)?;
     out.report.vertices = file_mesh.positions.len();

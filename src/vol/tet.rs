@@ -87,29 +87,19 @@ impl TetMesh {
             )));
         }
         check_indices(&self.tets, self.positions.len(), file)?;
-        let mut keyed: Vec<([u32; 4], usize)> = self
-            .tets
-            .iter()
-            .enumerate()
-            .map(|(t, tet)| {
-                let mut k = *tet;
-                k.sort_unstable();
-                (k, t)
+        if let Some((t, v)) = self.tets.iter().enumerate().find_map(|(t, tet)| {
+            (0..4).find_map(|a| {
+                ((a + 1)..4)
+                    .find(|&b| tet[a] == tet[b])
+                    .map(|_| (t, tet[a]))
             })
-            .collect();
-        if let Some(&(k, t)) = keyed
-            .iter()
-            .find(|(k, _)| k.windows(2).any(|w| w[0] == w[1]))
-        {
+        }) {
             return Err(VolError::Input(format!(
-                "{}: tet {t} uses vertex {} twice",
-                file.display(),
-                k.windows(2).find(|w| w[0] == w[1]).map_or(0, |w| w[0])
+                "{}: tet {t} uses vertex {v} twice",
+                file.display()
             )));
         }
-        keyed.sort_unstable();
-        if let Some(w) = keyed.windows(2).find(|w| w[0].0 == w[1].0) {
-            let (a, b) = (w[0].1.min(w[1].1), w[0].1.max(w[1].1));
+        if let Some((a, b)) = crate::mesh::validate::first_duplicate(&self.tets) {
             return Err(VolError::Input(format!(
                 "{}: tet {b} is a duplicate of tet {a} (same four vertices)",
                 file.display()

@@ -60,6 +60,49 @@ fn fields(
     })
 }
 
+/// The `n` records announced by a header, read one at a time: each must exist (else the file
+/// is truncated) and have exactly `width` fields, and nothing may follow the last one.
+struct Announced<'a, I> {
+    recs: I,
+    file: &'a Path,
+    n: usize,
+    width: usize,
+    /// "point" or "tet".
+    what: &'static str,
+    last: usize,
+}
+
+impl<'a, 't, I: Iterator<Item = (usize, Vec<&'t str>)>> Announced<'a, I> {
+    /// Record `i` (0-based) with its line.
+    fn get(&mut self, i: usize) -> Result<(usize, Vec<&'t str>), VolError> {
+        let Some((l, t)) = self.recs.next() else {
+            return Err(VolError::Truncated {
+                file: self.file.to_path_buf(),
+                line: self.last,
+                what: format!("{} {}s announced, {i} found", self.n, self.what),
+            });
+        };
+        self.last = l;
+        fields(&t, self.width, self.file, l, &format!("a {}", self.what))?;
+        Ok((l, t))
+    }
+
+    /// Nothing after the announced records (a record more means the header is wrong).
+    fn end(mut self) -> Result<(), VolError> {
+        match self.recs.next() {
+            Some((l, _)) => Err(VolError::Parse {
+                file: self.file.to_path_buf(),
+                line: l,
+                msg: format!(
+                    "a record after the {} {}s the header announces",
+                    self.n, self.what
+                ),
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
 /// The header counts of `.node` / `.ele` are untrusted: sums are checked, and a count larger
 /// than the lines of the file is found to be truncated by reading, never by arithmetic.
 fn count_plus(a: usize, b: usize, file: &Path, line: usize) -> Result<usize, VolError> {
@@ -124,17 +167,16 @@ pub fn parse_node(text: &str, file: &Path) -> Result<NodeFile, VolError> {
     let mut pos = Vec::with_capacity(n.min(text.len() / 8));
     let mut refs = Vec::with_capacity(n.min(text.len() / 8));
     let mut base = 0;
-    let mut last = hl;
+    let mut records = Announced {
+        recs,
+        file,
+        n,
+        width,
+        what: "point",
+        last: hl,
+    };
     for i in 0..n {
-        let Some((l, t)) = recs.next() else {
-            return Err(VolError::Truncated {
-                file: file.to_path_buf(),
-                line: last,
-                what: format!("{n} points announced, {i} found"),
-            });
-        };
-        last = l;
-        fields(&t, width, file, l, "a point")?;
+        let (l, t) = records.get(i)?;
         let idx: i64 = num(t.first(), file, l, "a point index")?;
         if i == 0 {
             base = idx;
@@ -172,13 +214,7 @@ pub fn parse_node(text: &str, file: &Path) -> Result<NodeFile, VolError> {
         pos.push(p);
         refs.push(r);
     }
-    if let Some((l, _)) = recs.next() {
-        return Err(VolError::Parse {
-            file: file.to_path_buf(),
-            line: l,
-            msg: format!("a record after the {n} points the header announces"),
-        });
-    }
+    records.end()?;
     Ok((pos, refs, base))
 }
 
@@ -212,18 +248,17 @@ pub fn parse_ele(
     let width = count_plus(1 + npt, nattr, file, hl)?;
     let mut tets = Vec::with_capacity(n.min(text.len() / 10));
     let mut refs = Vec::with_capacity(n.min(text.len() / 10));
-    let mut last = hl;
     let mut tbase = 0i64;
+    let mut records = Announced {
+        recs,
+        file,
+        n,
+        width,
+        what: "tet",
+        last: hl,
+    };
     for ti in 0..n {
-        let Some((l, t)) = recs.next() else {
-            return Err(VolError::Truncated {
-                file: file.to_path_buf(),
-                line: last,
-                what: format!("{n} tets announced, {ti} found"),
-            });
-        };
-        last = l;
-        fields(&t, width, file, l, "a tet")?;
+        let (l, t) = records.get(ti)?;
         let idx: i64 = num(t.first(), file, l, "a tet index")?;
         if ti == 0 {
             tbase = idx;
@@ -270,13 +305,7 @@ pub fn parse_ele(
         tets.push(tet);
         refs.push(r);
     }
-    if let Some((l, _)) = recs.next() {
-        return Err(VolError::Parse {
-            file: file.to_path_buf(),
-            line: l,
-            msg: format!("a record after the {n} tets the header announces"),
-        });
-    }
+    records.end()?;
     Ok((tets, refs))
 }
 
