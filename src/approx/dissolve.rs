@@ -310,9 +310,9 @@ impl Moves<'_> {
     /// `max_faces` faces goes entirely into one neighbour (closest plane normal first), keeping
     /// every plane. Where [`dissolve_folded_regions`] hands each face to its own closest neighbour,
     /// here the region's outline disappears as a whole, so the vertices that were on its outline
-    /// go onto planes they already neighboured; that keeps the chains of one boundary together
-    /// (rocker_arm K = 100 seed 1: four regions of 35–172 faces go this way and, with five ring
-    /// moves, the run ends without a fold). At most `max_trials` moves are tried; returns those
+    /// go onto planes they already neighboured; that keeps the chains of one boundary together,
+    /// which face-by-face moves break when a region's faces have different closest neighbours.
+    /// At most `max_trials` moves are tried; returns those
     /// kept (the regions are left empty: the caller renumbers).
     pub fn absorb_regions(
         &self,

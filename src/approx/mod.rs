@@ -374,10 +374,11 @@ impl ApproxOutput {
 /// other seeds while folds are left (see `ApproxOptions::restarts`). `progress` is told when
 /// each stage starts.
 ///
-/// Why restarts: which faces seed the regions decides the partition, and on curved CAD parts
-/// some partitions cannot be made planar without folds while others can (block K = 24: 70, 497,
-/// 13 and 0 bad faces on seeds 1–4), and even a single fold left by the end repairs often
-/// is absent on the next seed (bunny_npm K = 100: 1, 0, 0, 2, 2 bad faces on seeds 1–5).
+/// Why restarts: which faces seed the regions decides the partition, and whether a partition
+/// can be made planar without folds is a property of the partition (its plane arrangement),
+/// which later stages only repair locally; another seed gives an independent partition, so a
+/// fold that survives the repairs is often absent from the next run (BENCHMARKS.md, planar
+/// approximation rounds, counts bad faces per seed).
 /// Each restart costs a whole run; runs that fold only a little are cheap (the expensive
 /// repairs are skipped where hundreds of faces fold).
 pub fn approximate(
@@ -614,9 +615,8 @@ fn run_once(
             min_area,
         );
         let nbad = bad.len();
-        // After a split that folds far more than the best pass (rocker_arm K = 24: 2 bad faces,
-        // then 657 after splitting one region), the passes would build on the worse partition
-        // (576, 568, 516 bad, 15–35 s each): stop and keep the best.
+        // After a split that folds far more than the best pass, the following passes build on
+        // the worse partition (splits only add regions; none is undone): stop and keep the best.
         if split_passes > 0
             && best
                 .as_ref()
@@ -624,9 +624,9 @@ fn run_once(
         {
             break;
         }
-        // A few folds left: the end-stage repairs often clear them at a fraction of the cost
-        // of further passes (bunny_npm K = 60: 0.1–0.7 s of nudges, where three split passes
-        // and 0.55 s of slides came first before). Tried on a copy; kept only when nothing
+        // A few folds left: the end-stage repairs work locally at the folds, where another
+        // split pass re-planarizes the whole mesh, so they clear a few folds at a fraction of
+        // the cost. Tried on a copy; kept only when nothing
         // folds afterwards.
         let tried = nbad > 0 && nbad <= EARLY_END_MAX_BAD;
         let (nbad, bad) = if tried {
@@ -884,9 +884,11 @@ fn run_once(
 }
 
 /// Most bad faces for which a pass runs its fold moves (and the kept pass its slides). Above,
-/// the partition itself folds: block K = 24 seed 2 has 643–1 443 bad faces per pass, and the
-/// moves took 15–36 s per pass to leave 588 — the run is not kept when another seed does
-/// better, and a run that bad is no answer either way.
+/// the partition itself folds, which local moves do not change, and each move costs a local
+/// repair: the run is left to a restart with another seed. These face counts (here and in the
+/// three constants below) are absolute, not scale-free: they were fitted on the twelve
+/// acceptance runs (BENCHMARKS.md, planar approximation rounds) and are not yet measured over
+/// the corpus' CAD folder; the redesign of this stage (issue 23) is meant to remove them.
 const FOLD_MOVES_MAX_BAD: usize = 400;
 
 /// A split pass leaving more than this × the best pass's bad faces, plus
@@ -1053,10 +1055,10 @@ impl EndStage<'_> {
     /// splits of the regions that fold ([`split`]), in turn while they remove folds: a
     /// dissolved region changes the outlines the planes must meet, a nudged plane the corners a
     /// move must reach. Each keeps a change only where it leaves fewer bad faces; the smaller
-    /// changes come first (pair moves before whole-region moves: rocker_arm K = 100 seed 1
-    /// keeps 2 folds the other way round, none this way). Skipped above `END_REPAIR_MAX_BAD`:
-    /// that many folds come from the partition itself (block 24 keeps its 70 through 2 000
-    /// trials) and each trial costs a local repair.
+    /// changes come first (pair moves before whole-region moves: a whole-region move changes
+    /// every outline around it and can take away the outline a two-face move needed).
+    /// Skipped above `END_REPAIR_MAX_BAD`: that many folds come from the partition itself,
+    /// which local moves do not change, and each trial costs a local repair.
     fn repair(
         &self,
         fc: &mut [u32],

@@ -209,7 +209,8 @@ impl Barrier for Problem<'_> {
 
 /// Dot product, summed in pairs: the order of the 2D untangler's sums before it was written
 /// over flat vectors, kept so that its results stay bit-identical.
-/// (`chunks_exact`: the generic `chunks` version took a fifth of rocker_arm's run time.)
+/// (`chunks_exact`: the fixed chunk length lets the compiler drop the per-chunk length checks
+/// in this innermost loop, which the generic `chunks` keeps.)
 fn dotv(a: &[f64], b: &[f64]) -> f64 {
     let (pa, pb) = (a.chunks_exact(2), b.chunks_exact(2));
     let tail: f64 = pa

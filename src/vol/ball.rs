@@ -144,8 +144,8 @@ pub fn sphere_deviation(mesh: &TetMesh, x: &[[f64; 3]]) -> f64 {
 /// which it meets exactly — when no tet is left inverted.
 ///
 /// Why: a fixed spherical embedding can invert tets whose four corners are all boundary
-/// vertices (47 on the hand: tets spanning a thin finger), and then no map with that boundary
-/// exists. The sphere is the target, not one parametrisation of it, so the boundary slides.
+/// vertices (tets spanning a thin protrusion, placed by the surface embedding alone), and then
+/// no map with that boundary exists. The sphere is the target, not one parametrisation of it, so the boundary slides.
 pub fn slide_on_sphere(
     mesh: &TetMesh,
     start: &[[f64; 3]],
@@ -173,7 +173,7 @@ pub fn slide_on_sphere(
         delta_t_before_relax: None,
     };
     // Then the distortion itself, boundary still sliding: the untangler stops at the first
-    // fold-free map, whose finger-tip tets are squeezed on the sphere (hand: max 3.5e7).
+    // fold-free map, whose tets at the tips of protrusions are squeezed on the sphere.
     if let (Some(nopts), 0) = (relax, s.inverted) {
         let t0 = Instant::now();
         let obj = distortion_objective(mesh, fixed, on_sphere)?;

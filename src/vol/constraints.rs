@@ -81,7 +81,7 @@ pub fn constraints_text(c: &[(u32, [f64; 3])], header: &str) -> String {
 /// A twist of part of the boundary: along the longest bounding-box axis, boundary vertices in
 /// the first `fraction` of the length stay where they are, those in the last `fraction` are
 /// rotated by `degrees` about the axis through the bounding-box centre, the rest are free.
-/// A real deformation target for meshes with no natural one (the rocker arm).
+/// A real deformation target for meshes with no natural one (a mechanical part).
 pub fn twist_constraints(mesh: &TetMesh, degrees: f64, fraction: f64) -> Vec<(u32, [f64; 3])> {
     let p = &mesh.positions;
     let (lo, hi) = super::tet::bbox(p);

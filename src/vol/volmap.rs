@@ -30,26 +30,31 @@ pub struct VolmapOptions {
     pub lambda_growth: f64,
     pub max_rounds: usize,
     /// When a penalty round leaves ρ above half its previous value, continue the penalty
-    /// rounds with the unguided (rest-relative) distortion. Off by default: on the armadillo
-    /// it did not release the stall (BENCHMARKS.md).
+    /// rounds with the unguided (rest-relative) distortion. Off by default: the paper's
+    /// guided rounds; this variant is an experiment that has not released a stall where it
+    /// was measured (BENCHMARKS.md, volumetric maps).
     pub unguide_on_stall: bool,
     /// Newton settings of the deformation and penalty phases.
     pub newton: NewtonOptions,
-    /// Newton settings of the penalty rounds (separate so they can be tightened; tighter
-    /// PCG (1e-8, 1500 iterations) did not unlock the armadillo stall, see BENCHMARKS.md).
+    /// Newton settings of the penalty rounds (separate so they can be tightened; BENCHMARKS.md
+    /// records that tighter PCG did not change where a penalty stall ends: the stall is in the
+    /// penalty trade-off, not in the linear solves).
     pub penalty: NewtonOptions,
     /// Newton settings of the post-optimisation (None: skipped).
     pub post: Option<NewtonOptions>,
     /// Replace the deformation and penalty phases by the untangler of Garanzha et al. 2021
     /// started from the init with the constrained vertices on their targets (ρ = 0 by
     /// construction). If it leaves an inverted tet, the paper's phases run as usual.
-    /// On by default: on the armadillo it meets ρ = 0 and δ_t 10.92 in ~15 s where the
-    /// penalty phases stall at ρ 1.2e-3 (BENCHMARKS.md); None runs the paper's pipeline only.
+    /// On by default: it imposes the constraints instead of penalising them, so when it ends
+    /// fold-free ρ = 0 by construction, where the penalty rounds trade ρ against distortion
+    /// and can stall above θ (BENCHMARKS.md measures both); None runs the paper's pipeline only.
     pub untangle: Option<UntangleOptions>,
     /// `--target ball`: Newton on the distortion with the boundary sliding on the sphere,
-    /// after the sliding untangler (None: skipped). Capped because the path is long — the
-    /// fingers of a hand spread over the sphere at steps the flip-free bound keeps small
-    /// (hand: δ_t 48.7 → 32.7 in 150 steps, → 24.7 in 500; BENCHMARKS.md).
+    /// after the sliding untangler (None: skipped). Capped because the path is long: thin
+    /// protrusions spread over the sphere at steps the flip-free bound keeps small, and every
+    /// step is fold-free and on the sphere, so stopping early costs distortion, never validity.
+    /// The cap (150) is a time budget, not a derived value; it has been measured on the shared
+    /// tet meshes only, not over the corpus' tet folder (BENCHMARKS.md).
     pub ball_relax: Option<NewtonOptions>,
 }
 
