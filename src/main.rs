@@ -289,7 +289,7 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
 fn run_volmap_constraints(a: VolConstraintArgs) -> foldfree::Result<()> {
     use foldfree::vol::constraints::{constraints_text, twist_constraints};
     let mut outputs = Outputs::new();
-    foldfree::vol::job::tet_input(&mut outputs, &a.rest);
+    foldfree::vol::tetgen::tet_input(&mut outputs, &a.rest);
     outputs.output(&a.output, "constraints", &[])?;
     if !(0.0..0.5).contains(&a.fraction) || !a.twist.is_finite() {
         return Err(foldfree::Error::Usage(
@@ -738,7 +738,7 @@ fn run_render(args: RenderArgs) -> foldfree::Result<()> {
     use foldfree::gpu::{render_checker, Context, ContextDesc, RenderDesc};
     use foldfree::viz::render::{encode_rgba_png, read_obj_with_uv};
     let mut outputs = Outputs::new();
-    foldfree::vol::job::tet_input(&mut outputs, &args.input);
+    foldfree::vol::tetgen::tet_input(&mut outputs, &args.input);
     outputs.output(&args.output, "picture", &["png"])?;
     let (positions, uvs, indices) = match args.shade {
         ShadeArg::Checker => read_obj_with_uv(&args.input, args.max_elements)?.corners(),

@@ -7,7 +7,7 @@ mod outputs;
 mod read;
 
 pub use outputs::Outputs;
-pub use read::{read_bounded, BYTES_PER_ELEMENT, DEFAULT_MAX_ELEMENTS};
+pub use read::{byte_limit, read_bounded, BYTES_PER_ELEMENT, DEFAULT_MAX_ELEMENTS};
 
 use std::path::PathBuf;
 

@@ -15,6 +15,14 @@ pub const DEFAULT_MAX_ELEMENTS: usize = 20_000_000;
 /// of a run is this times its element limit.
 pub const BYTES_PER_ELEMENT: u64 = 256;
 
+/// The file size limit of a run allowed `elements` faces or tets: [`BYTES_PER_ELEMENT`] each,
+/// and never under 1 MiB (headers and comments of a tiny mesh).
+pub fn byte_limit(elements: usize) -> u64 {
+    (elements as u64)
+        .saturating_mul(BYTES_PER_ELEMENT)
+        .max(1 << 20)
+}
+
 /// Reads a whole input file, refusing more than `limit` bytes. The bound is enforced while
 /// reading (a FIFO, `/dev/zero` or a file that grows are not trusted by their metadata), and
 /// only regular files are opened: opening a FIFO with no writer would block for ever.

@@ -55,9 +55,7 @@ pub fn read_obj_with_info(path: &Path, max_faces: usize) -> Result<(TriMesh, Obj
             });
         }
     }
-    let limit = (max_faces as u64)
-        .saturating_mul(crate::files::BYTES_PER_ELEMENT)
-        .max(1 << 20);
+    let limit = crate::files::byte_limit(max_faces);
     let why = format!("an OBJ of at most {max_faces} faces");
     let bytes = crate::files::read_bounded(path, limit, &why).map_err(|e| match e {
         crate::files::FileError::TooLarge { .. } => MeshError::TooLarge {

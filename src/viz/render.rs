@@ -147,9 +147,7 @@ fn no_vt(name: &str) -> Error {
 
 /// Reads `path` with [`parse_obj_with_uv`].
 pub fn read_obj_with_uv(path: &Path, max_faces: usize) -> Result<UvObj> {
-    let limit = (max_faces as u64)
-        .saturating_mul(crate::files::BYTES_PER_ELEMENT)
-        .max(1 << 20);
+    let limit = crate::files::byte_limit(max_faces);
     let bytes = crate::files::read_bounded(path, limit, "the --max-faces limit")?;
     let text = String::from_utf8(bytes).map_err(|_| {
         crate::Error::Mesh(crate::mesh::MeshError::Read {

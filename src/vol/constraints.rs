@@ -58,10 +58,8 @@ pub fn parse_constraints(
 
 /// Reads a constraints file.
 pub fn read_constraints(path: &Path, nv: usize) -> Result<Vec<(u32, [f64; 3])>, VolError> {
-    // A constraint line takes at least 8 bytes; more lines than vertices cannot be valid.
-    let limit = (nv as u64)
-        .saturating_mul(crate::files::BYTES_PER_ELEMENT)
-        .max(1 << 20);
+    // At most one line per vertex is valid, so the vertex count bounds the file.
+    let limit = crate::files::byte_limit(nv);
     let text = super::error::read_text(path, limit)?;
     parse_constraints(&text, path, nv)
 }

@@ -9,10 +9,12 @@ use serde::Serialize;
 use super::ball::{ball_target, slide_on_sphere, SlideReport};
 use super::constraints::{constraints_text, read_constraints};
 use super::harmonic::harmonic_extension;
-use super::tetgen::{output_files, output_texts, parse_output, read_any_with_limit, tetgen_paths};
+use super::tetgen::{
+    files_of, output_texts, parse_output, read_any_with_limit, tet_input, tet_output,
+};
 use super::volmap::{evaluate, volmap, MapQuality, VolmapOptions, VolmapReport};
 use super::{TetMesh, VolError};
-use crate::files::{Outputs, DEFAULT_MAX_ELEMENTS};
+use crate::files::Outputs;
 use crate::mesh::Scale;
 
 /// Where the position constraints come from.
@@ -40,48 +42,6 @@ pub struct VolmapJob {
     /// Refuse meshes of more tets (and files larger than such a mesh's text).
     pub max_tets: usize,
     pub options: VolmapOptions,
-}
-
-impl VolmapJob {
-    /// A job with the default options and limits.
-    pub fn new(
-        rest: impl Into<PathBuf>,
-        constraints: ConstraintSource,
-        output: impl Into<PathBuf>,
-    ) -> VolmapJob {
-        VolmapJob {
-            rest: rest.into(),
-            init: None,
-            constraints,
-            output: output.into(),
-            report: None,
-            write_constraints: None,
-            quiet: true,
-            max_tets: DEFAULT_MAX_ELEMENTS,
-            options: VolmapOptions::default(),
-        }
-    }
-}
-
-/// Records a tet mesh input (both files of a TetGen pair) in a run's outputs.
-pub fn tet_input(outputs: &mut Outputs, path: &Path) {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some("node") | Some("ele") => {
-            let (n, e) = tetgen_paths(path);
-            outputs.input(&n).input(&e);
-        }
-        _ => {
-            outputs.input(path);
-        }
-    }
-}
-
-/// Plans a tet mesh output (both files of a TetGen pair) in a run's outputs.
-pub fn tet_output(outputs: &mut Outputs, path: &Path, what: &str) -> Result<(), VolError> {
-    for f in output_files(path)? {
-        outputs.output(&f, what, &["mesh", "node", "ele"])?;
-    }
-    Ok(())
 }
 
 /// The JSON written by `--report`.
@@ -278,7 +238,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
             written.delta_t
         )));
     }
-    for (f, t) in output_files(&job.output)?.iter().zip(texts) {
+    for (f, t) in files_of(&job.output)?.iter().zip(texts) {
         outputs.set(f, t.into_bytes());
     }
     let report = VolmapFileReport {

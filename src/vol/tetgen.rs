@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use super::tet::TetMesh;
 use super::VolError;
+use crate::files::Outputs;
 
 /// Non-empty, comment-stripped lines with their 1-based numbers, as a stream: nothing is held
 /// but the current line, so memory does not grow with the file.
@@ -382,9 +383,7 @@ pub fn read_any(path: &Path) -> Result<TetMesh, VolError> {
 /// `max_tets` tets (and files of at most that many tets' worth of bytes), and checks its
 /// structure ([`TetMesh::check_structure`]).
 pub fn read_any_with_limit(path: &Path, max_tets: usize) -> Result<TetMesh, VolError> {
-    let limit = (max_tets as u64)
-        .saturating_mul(crate::files::BYTES_PER_ELEMENT)
-        .max(1 << 20);
+    let limit = crate::files::byte_limit(max_tets);
     let m = match format_of(path)? {
         Format::TetGen => read_tetgen(path, limit)?,
         Format::Medit => super::medit::read_medit(path, limit)?,
@@ -400,8 +399,8 @@ pub fn read_any_with_limit(path: &Path, max_tets: usize) -> Result<TetMesh, VolE
     Ok(m)
 }
 
-/// The files a tet mesh output at `path` consists of (TetGen: the `.node` and `.ele` pair).
-pub fn output_files(path: &Path) -> Result<Vec<PathBuf>, VolError> {
+/// The files a tet mesh at `path` consists of (TetGen: the `.node` and `.ele` pair).
+pub fn files_of(path: &Path) -> Result<Vec<PathBuf>, VolError> {
     Ok(match format_of(path)? {
         Format::TetGen => {
             let (n, e) = tetgen_paths(path);
@@ -411,7 +410,23 @@ pub fn output_files(path: &Path) -> Result<Vec<PathBuf>, VolError> {
     })
 }
 
-/// The contents of the files of [`output_files`], in the same order.
+/// Records a tet mesh input (both files of a TetGen pair) in a run's outputs; a path of no
+/// tet format is recorded as it is (its reader reports the format).
+pub fn tet_input(outputs: &mut Outputs, path: &Path) {
+    for f in files_of(path).unwrap_or_else(|_| vec![path.to_path_buf()]) {
+        outputs.input(&f);
+    }
+}
+
+/// Plans a tet mesh output (both files of a TetGen pair) in a run's outputs.
+pub fn tet_output(outputs: &mut Outputs, path: &Path, what: &str) -> Result<(), VolError> {
+    for f in files_of(path)? {
+        outputs.output(&f, what, &["mesh", "node", "ele"])?;
+    }
+    Ok(())
+}
+
+/// The contents of the files of [`files_of`], in the same order.
 pub fn output_texts(
     path: &Path,
     mesh: &TetMesh,
@@ -438,12 +453,12 @@ pub fn output_texts(
 /// Writes a tet mesh (both files of a TetGen pair together, see [`crate::files::Outputs`]),
 /// never over an existing file of another kind.
 pub fn write_any(path: &Path, mesh: &TetMesh, positions: &[[f64; 3]]) -> Result<(), VolError> {
-    let mut outputs = crate::files::Outputs::new();
-    let files = output_files(path)?;
-    for f in &files {
-        outputs.output(f, "tet mesh", &["mesh", "node", "ele"])?;
-    }
-    for (f, t) in files.iter().zip(output_texts(path, mesh, positions)?) {
+    let mut outputs = Outputs::new();
+    tet_output(&mut outputs, path, "tet mesh")?;
+    for (f, t) in files_of(path)?
+        .iter()
+        .zip(output_texts(path, mesh, positions)?)
+    {
         outputs.set(f, t.into_bytes());
     }
     outputs.commit()?;
