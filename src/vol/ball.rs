@@ -10,9 +10,10 @@
 
 use std::path::Path;
 
+use super::energy::{inv3, IDENTITY};
 use super::harmonic::harmonic_extension;
-use super::newton::{newton, NewtonOptions, Pattern};
-use super::tet::{cross, dot, is_positive, TetMesh};
+use super::newton::{corner_weights, newton, NewtonOptions, Objective, Pattern};
+use super::tet::{cross, dot, is_positive, sub, TetMesh};
 use super::untangle::{untangle_sliding, UntangleOptions};
 use super::volmap::distortion_objective;
 use super::Targets;
@@ -24,7 +25,10 @@ use std::time::Instant;
 
 /// The sphere positions of the boundary vertices (mesh indices) and the number of boundary
 /// triangles whose chordal triangle is not positive seen from the centre.
-pub fn sphere_embedding(mesh: &TetMesh) -> Result<(Targets, usize), VolError> {
+pub fn sphere_embedding(
+    mesh: &TetMesh,
+    relax: Option<&NewtonOptions>,
+) -> Result<(Targets, usize), VolError> {
     let faces = mesh.boundary_faces();
     let verts = mesh.boundary_vertices();
     let mut local = vec![u32::MAX; mesh.positions.len()];
@@ -101,13 +105,102 @@ pub fn sphere_embedding(mesh: &TetMesh) -> Result<(Targets, usize), VolError> {
     };
     let (p0, p1) = (lift(s, false), lift(s, true));
     let (b0, b1) = (bad(&p0), bad(&p1));
-    let (pos, nbad) = if b0 <= b1 { (p0, b0) } else { (p1, b1) };
+    let (mut pos, nbad) = if b0 <= b1 { (p0, b0) } else { (p1, b1) };
+    if nbad == 0 {
+        if let Some(nopts) = relax {
+            relax_on_sphere(&lp, &lf, &mut pos, nopts)?;
+        }
+    }
     Ok((verts.iter().zip(pos).map(|(&v, p)| (v, p)).collect(), nbad))
 }
 
+/// Lowers the distortion of a fold-free spherical embedding `pos` of the surface (`rest`,
+/// `faces`), every vertex sliding on the unit sphere, and keeps it fold-free.
+///
+/// Why: a Tutte or conformal embedding shrinks a protrusion's area exponentially in its
+/// length-to-width ratio (a fingertip of a hand ends up at 1e-10 of the sphere), and tets
+/// there are then numerically degenerate: det J and its gradient (the cofactors of a rank ≤ 1
+/// Jacobian) both vanish, so no untangler can move them. Minimising a distortion that
+/// penalises compression as much as stretch spreads every region to about its share of the
+/// sphere's area.
+///
+/// How, with the machinery of the volume map: each face becomes the "cone" tet (centre, a, b,
+/// c), positive exactly when the chordal triangle is positive seen from the centre, measured
+/// against a reference tet made of the rest face scaled to the sphere's total area with the
+/// apex at distance 1 below its centroid (the distance of a small chordal face from the
+/// centre). Newton on that symmetric Dirichlet energy, with the centre fixed and the surface
+/// vertices sliding, takes only fold-free steps (the flip-free line search of every tet), so
+/// stopping at any iteration leaves a valid embedding: the cap is a time budget.
+pub fn relax_on_sphere(
+    rest: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    pos: &mut [[f64; 3]],
+    opts: &NewtonOptions,
+) -> Result<usize, VolError> {
+    let n = pos.len();
+    let centre = n as u32;
+    let area = |f: &[u32; 3]| {
+        let [a, b, c] = f.map(|v| rest[v as usize]);
+        0.5 * dot(cross(sub(b, a), sub(c, a)), cross(sub(b, a), sub(c, a))).sqrt()
+    };
+    let total: f64 = faces.iter().map(area).sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return Ok(0);
+    }
+    let k = (4.0 * std::f64::consts::PI / total).sqrt();
+    let mut d_dist = Vec::with_capacity(faces.len());
+    let mut weight = Vec::with_capacity(faces.len());
+    for f in faces {
+        let [a, b, c] = f.map(|v| rest[v as usize]).map(|p| p.map(|q| k * q));
+        let nrm = cross(sub(b, a), sub(c, a));
+        let len = dot(nrm, nrm).sqrt();
+        let apex = if len > 0.0 {
+            let cen = [0, 1, 2].map(|r| (a[r] + b[r] + c[r]) / 3.0);
+            [0, 1, 2].map(|r| cen[r] - nrm[r] / len)
+        } else {
+            return Ok(0); // a degenerate rest face: no reference shape, keep the embedding
+        };
+        // Dm = [a − o, b − o, c − o] for the tet (o, a, b, c).
+        let e = [sub(a, apex), sub(b, apex), sub(c, apex)];
+        let dm = [0, 1, 2].map(|r| [e[0][r], e[1][r], e[2][r]]);
+        let Some(inv) = inv3(&dm) else { return Ok(0) };
+        d_dist.push(corner_weights(&inv));
+        weight.push(area(f) / total);
+    }
+    let tets: Vec<[u32; 4]> = faces.iter().map(|f| [centre, f[0], f[1], f[2]]).collect();
+    let mut x = pos.to_vec();
+    x.push([0.0; 3]);
+    let mut fixed = vec![false; n + 1];
+    fixed[n] = true;
+    let mut on_sphere = vec![true; n + 1];
+    on_sphere[n] = false;
+    let obj = Objective {
+        tets: tets.clone(),
+        weight,
+        d_fit: d_dist.clone(),
+        d_dist,
+        guide: vec![IDENTITY; faces.len()],
+        omega: 0.0,
+        targets: Vec::new(),
+        lambda: 0.0,
+        fixed,
+        on_sphere,
+    };
+    if !obj.value(&x).is_finite() {
+        return Ok(0);
+    }
+    let pattern = Pattern::new(n + 1, &tets);
+    let st = newton(&obj, &pattern, &mut x, opts, &mut |_, _| {})?;
+    pos.copy_from_slice(&x[..n]);
+    Ok(st.iterations)
+}
+
 /// Start map and constraints of the ball target: sphere boundary, harmonic interior.
-pub fn ball_target(mesh: &TetMesh) -> Result<(Vec<[f64; 3]>, Targets, usize), VolError> {
-    let (targets, nbad) = sphere_embedding(mesh)?;
+pub fn ball_target(
+    mesh: &TetMesh,
+    relax: Option<&NewtonOptions>,
+) -> Result<(Vec<[f64; 3]>, Targets, usize), VolError> {
+    let (targets, nbad) = sphere_embedding(mesh, relax)?;
     let zero = vec![[0.0; 3]; mesh.positions.len()];
     let init = harmonic_extension(mesh, &zero, &targets)?;
     Ok((init, targets, nbad))

@@ -114,7 +114,7 @@ pub fn constraints_for(
                 .collect())
         }
         ConstraintSource::File(p) => read_constraints(p, rest.positions.len()),
-        ConstraintSource::Ball => Ok(ball_target(rest)?.1),
+        ConstraintSource::Ball => Ok(ball_target(rest, None)?.1),
     }
 }
 
@@ -161,7 +161,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     let mut sliding = None;
     let (init, targets) = match &job.constraints {
         ConstraintSource::Ball => {
-            let (start, t, bad) = ball_target(&rest)?;
+            let (start, t, bad) = ball_target(&rest, job.options.sphere_relax.as_ref())?;
             sphere_bad = Some(bad);
             let start = init_pos.unwrap_or(start);
             match &job.options.untangle {

@@ -43,6 +43,12 @@ pub struct UntangleOptions {
     /// further is left to the post-optimisation, which minimises the measured distortion
     /// itself, where more untangler iterations minimise its ε-regularised stand-in.
     pub rel_tol: f64,
+    /// End the L-BFGS steps of one ε once a step lowers the energy by less than this fraction
+    /// of it (scale-free: the energy is a volume-weighted mean). Default 1e-6, the stopping
+    /// rule of the reference implementation's L-BFGS (stlbfgs `ftol`): each ε only has to be
+    /// solved well enough for the next, ≥ 10 % smaller ε (the schedule's σ ≥ 0.1), and steps
+    /// that change the energy in its sixth digit do not move the minimum det that sets it.
+    pub inner_rel_tol: f64,
 }
 
 impl Default for UntangleOptions {
@@ -53,6 +59,7 @@ impl Default for UntangleOptions {
             max_inner: 200,
             history: 10,
             rel_tol: f64::INFINITY,
+            inner_rel_tol: 1e-6,
         }
     }
 }
@@ -97,7 +104,8 @@ pub fn untangle_energy(j: &Mat3, eps: f64, theta: f64) -> (f64, Mat3) {
     let d = det3(j);
     let (x, dx) = chi(d, eps);
     let c = frob2(j);
-    let x23 = x.powf(2.0 / 3.0);
+    let x13 = x.cbrt();
+    let x23 = x13 * x13;
     let f = (1.0 - theta) * c / x23 + theta * (d * d + 1.0) / x;
     // ∂f/∂D, then ∂f/∂J = 2(1 − θ)J/χ^{2/3} + ∂f/∂D · cof J.
     let df_dd = (1.0 - theta) * (-2.0 / 3.0) * c / (x23 * x) * dx
@@ -112,15 +120,66 @@ pub fn untangle_energy(j: &Mat3, eps: f64, theta: f64) -> (f64, Mat3) {
     (f, g)
 }
 
+/// The untangling energy over a tet mesh with per-tet reference data, evaluated with reused
+/// buffers: per-tet terms in parallel (rayon), then the gradient gathered per vertex from its
+/// incident (tet, corner) slots in a fixed order and the energy summed in tet order, so the
+/// result is the same bit for bit on any number of threads (the Armijo tests compare energies
+/// that differ in their last digits near convergence).
 struct Problem<'a> {
     tets: &'a [[u32; 4]],
     d: Vec<Corner>,
     w: Vec<f64>,
     fixed: &'a [bool],
     theta: f64,
+    /// Incident slots 4·t + c of each vertex: `inc[start[v]..start[v + 1]]`.
+    start: Vec<usize>,
+    inc: Vec<u32>,
 }
 
-impl Problem<'_> {
+/// Per-tet results of one evaluation.
+#[derive(Default)]
+struct Scratch {
+    f: Vec<f64>,
+    g: Vec<[f64; 12]>,
+}
+
+impl<'a> Problem<'a> {
+    fn new(
+        tets: &'a [[u32; 4]],
+        d: Vec<Corner>,
+        w: Vec<f64>,
+        fixed: &'a [bool],
+        theta: f64,
+    ) -> Self {
+        let nv = fixed.len();
+        let mut start = vec![0usize; nv + 1];
+        for t in tets {
+            for &v in t {
+                start[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..nv {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut inc = vec![0u32; 4 * tets.len()];
+        for (t, tet) in tets.iter().enumerate() {
+            for (c, &v) in tet.iter().enumerate() {
+                inc[fill[v as usize]] = (4 * t + c) as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        Problem {
+            tets,
+            d,
+            w,
+            fixed,
+            theta,
+            start,
+            inc,
+        }
+    }
+
     fn dets(&self, x: &[[f64; 3]]) -> Vec<f64> {
         (0..self.tets.len())
             .into_par_iter()
@@ -128,48 +187,50 @@ impl Problem<'_> {
             .collect()
     }
 
-    fn value(&self, x: &[[f64; 3]], eps: f64) -> f64 {
-        (0..self.tets.len())
-            .into_par_iter()
-            .map(|t| {
-                let j = jacobian(x, &self.tets[t], &self.d[t]);
-                self.w[t] * untangle_energy(&j, eps, self.theta).0
-            })
-            .sum()
+    fn value(&self, x: &[[f64; 3]], eps: f64, sc: &mut Scratch) -> f64 {
+        sc.f.resize(self.tets.len(), 0.0);
+        sc.f.par_iter_mut().enumerate().for_each(|(t, f)| {
+            let j = jacobian(x, &self.tets[t], &self.d[t]);
+            *f = self.w[t] * untangle_energy(&j, eps, self.theta).0;
+        });
+        sc.f.iter().sum()
     }
 
     /// Value and gradient (zero on fixed vertices), flattened 3n.
-    fn value_grad(&self, x: &[[f64; 3]], eps: f64, g: &mut [f64]) -> f64 {
-        let locals: Vec<(f64, [f64; 12])> = (0..self.tets.len())
-            .into_par_iter()
-            .map(|t| {
+    fn value_grad(&self, x: &[[f64; 3]], eps: f64, g: &mut [f64], sc: &mut Scratch) -> f64 {
+        let nt = self.tets.len();
+        sc.f.resize(nt, 0.0);
+        sc.g.resize(nt, [0.0; 12]);
+        sc.f.par_iter_mut()
+            .zip(sc.g.par_iter_mut())
+            .enumerate()
+            .for_each(|(t, (fo, go))| {
                 let d = &self.d[t];
                 let j = jacobian(x, &self.tets[t], d);
                 let (f, p) = untangle_energy(&j, eps, self.theta);
                 let w = self.w[t];
-                let mut gl = [0.0; 12];
                 for c in 0..4 {
                     for r in 0..3 {
-                        gl[3 * c + r] = w * (0..3).map(|k| p[r][k] * d[c][k]).sum::<f64>();
+                        go[3 * c + r] =
+                            w * (p[r][0] * d[c][0] + p[r][1] * d[c][1] + p[r][2] * d[c][2]);
                     }
                 }
-                (w * f, gl)
-            })
-            .collect();
-        g.iter_mut().for_each(|v| *v = 0.0);
-        let mut e = 0.0;
-        for (t, (f, gl)) in locals.iter().enumerate() {
-            e += f;
-            for (c, &v) in self.tets[t].iter().enumerate() {
-                if self.fixed[v as usize] {
-                    continue;
-                }
+                *fo = w * f;
+            });
+        let gl = &sc.g;
+        g.par_chunks_mut(3).enumerate().for_each(|(v, gv)| {
+            gv.iter_mut().for_each(|q| *q = 0.0);
+            if self.fixed[v] {
+                return;
+            }
+            for &slot in &self.inc[self.start[v]..self.start[v + 1]] {
+                let (t, c) = (slot as usize / 4, slot as usize % 4);
                 for r in 0..3 {
-                    g[3 * v as usize + r] += gl[3 * c + r];
+                    gv[r] += gl[t][3 * c + r];
                 }
             }
-        }
-        e
+        });
+        sc.f.iter().sum()
     }
 }
 
@@ -285,13 +346,15 @@ pub fn untangle_sliding(
             }
         }
     }
-    let prob = Problem {
-        tets: &rest.tets,
+    let prob = Problem::new(
+        &rest.tets,
         d,
-        w: vol.iter().map(|v| v / total).collect(),
+        vol.iter().map(|v| v / total).collect(),
         fixed,
-        theta: opts.theta,
-    };
+        opts.theta,
+    );
+    let mut sc = Scratch::default();
+    let mut evals = 0usize;
     let inverted_pinned = rest
         .tets
         .iter()
@@ -321,7 +384,7 @@ pub fn untangle_sliding(
         // for this energy's (the post-optimisation minimises the measured one).
         return Ok(UntangleStats {
             min_det: detmin,
-            energy: prob.value(x, 1e-10),
+            energy: prob.value(x, 1e-10, &mut sc),
             eps: 1e-10,
             seconds: start.elapsed().as_secs_f64(),
             ..Default::default()
@@ -336,8 +399,8 @@ pub fn untangle_sliding(
     let mut trial = x.to_vec();
     for outer in 0..opts.max_outer {
         stats.outer = outer + 1;
-        let e_prev = prob.value(x, eps);
-        let mut e = prob.value_grad(x, eps, &mut g);
+        let mut e = prob.value_grad(x, eps, &mut g, &mut sc);
+        let e_prev = e;
         project(x, &mut g);
         let mut s_hist: Vec<Vec<f64>> = Vec::new();
         let mut y_hist: Vec<Vec<f64>> = Vec::new();
@@ -391,13 +454,14 @@ pub fn untangle_sliding(
             let mut t = 1.0;
             let mut accepted = None;
             for _ in 0..40 {
+                evals += 1;
                 for v in 0..nv {
                     for r in 0..3 {
                         trial[v][r] = x[v][r] + t * dir[3 * v + r];
                     }
                 }
                 retract(&mut trial);
-                let et = prob.value_grad(&trial, eps, &mut g_new);
+                let et = prob.value_grad(&trial, eps, &mut g_new, &mut sc);
                 project(&trial, &mut g_new);
                 if et.is_finite() && et <= e + 1e-4 * t * slope {
                     accepted = Some(et);
@@ -426,7 +490,7 @@ pub fn untangle_sliding(
                 s_hist.push(s);
                 y_hist.push(y);
             }
-            if de <= 1e-9 * e.abs() {
+            if de <= opts.inner_rel_tol * e.abs() {
                 break;
             }
         }
@@ -442,7 +506,7 @@ pub fn untangle_sliding(
         stats.energy = e;
         if trace {
             eprintln!(
-                "untangle outer {outer}: E {e:.6e} min det {detmin:.3e} ε {eps:.3e} steps {}",
+                "untangle outer {outer}: E {e:.6e} min det {detmin:.3e} ε {eps:.3e} steps {} evaluations {evals}",
                 stats.iterations
             );
         }
