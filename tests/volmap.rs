@@ -501,3 +501,89 @@ fn cli_ball_target_writes_constraints_volcheck_confirms() {
     // The rest shape is not on the sphere: volcheck --sphere refuses it.
     assert_eq!(check(&rest).status.code(), Some(1));
 }
+
+/// The ball target's surface relaxation spreads a crowded spherical embedding (here a Möbius
+/// dilation of the inscribed octahedron, the kind of crowding a Tutte/stereographic map gives a
+/// protrusion) back towards equal areas, keeping every chordal triangle positive and every
+/// vertex on the sphere.
+#[test]
+fn sphere_relaxation_spreads_a_crowded_embedding() {
+    use foldfree::vol::ball::relax_on_sphere;
+    let rest: Vec<[f64; 3]> = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let faces: Vec<[u32; 3]> = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    // Stereographic coordinates from the north pole, scaled by 0.4, lifted back.
+    let crowd = |p: [f64; 3]| -> [f64; 3] {
+        let (a, b) = if p[2] > 0.999 {
+            return p;
+        } else {
+            (0.4 * p[0] / (1.0 - p[2]), 0.4 * p[1] / (1.0 - p[2]))
+        };
+        let r2 = a * a + b * b;
+        [
+            2.0 * a / (1.0 + r2),
+            2.0 * b / (1.0 + r2),
+            (r2 - 1.0) / (r2 + 1.0),
+        ]
+    };
+    let mut pos: Vec<[f64; 3]> = rest.iter().map(|&p| crowd(p)).collect();
+    let areas = |p: &[[f64; 3]]| -> Vec<f64> {
+        faces
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|v| p[v as usize]);
+                let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+                let w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+                let n = [
+                    u[1] * w[2] - u[2] * w[1],
+                    u[2] * w[0] - u[0] * w[2],
+                    u[0] * w[1] - u[1] * w[0],
+                ];
+                // Signed: positive when the triangle faces away from the centre.
+                0.5 * (n[0] * a[0] + n[1] * a[1] + n[2] * a[2]).signum()
+                    * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+            })
+            .collect()
+    };
+    let spread = |a: &[f64]| {
+        a.iter().cloned().fold(f64::MIN, f64::max) / a.iter().cloned().fold(f64::MAX, f64::min)
+    };
+    let before = areas(&pos);
+    assert!(before.iter().all(|&a| a > 0.0));
+    let it = relax_on_sphere(
+        &rest,
+        &faces,
+        &[],
+        &mut pos,
+        &foldfree::vol::newton::NewtonOptions::default(),
+    )
+    .unwrap();
+    let after = areas(&pos);
+    assert!(it > 0);
+    assert!(after.iter().all(|&a| a > 0.0), "{after:?}");
+    for p in &pos {
+        let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        assert!((r - 1.0).abs() < 1e-12, "off the sphere: {r}");
+    }
+    assert!(
+        spread(&after) < 1.05 && spread(&before) > 3.0,
+        "area spread {} → {}",
+        spread(&before),
+        spread(&after)
+    );
+}

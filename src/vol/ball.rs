@@ -10,11 +10,11 @@
 
 use std::path::Path;
 
-use super::energy::{inv3, IDENTITY};
+use super::energy::{det3, inv3, IDENTITY};
 use super::harmonic::harmonic_extension;
 use super::newton::{corner_weights, newton, NewtonOptions, Objective, Pattern};
 use super::tet::{cross, dot, is_positive, sub, TetMesh};
-use super::untangle::{untangle_sliding, UntangleOptions};
+use super::untangle::{untangle_cells, untangle_sliding, UntangleOptions};
 use super::volmap::distortion_objective;
 use super::Targets;
 use super::VolError;
@@ -24,7 +24,8 @@ use serde::Serialize;
 use std::time::Instant;
 
 /// The sphere positions of the boundary vertices (mesh indices) and the number of boundary
-/// triangles whose chordal triangle is not positive seen from the centre.
+/// triangles whose chordal triangle is not positive seen from the centre (after the
+/// relaxation, when `relax` is given).
 pub fn sphere_embedding(
     mesh: &TetMesh,
     relax: Option<&NewtonOptions>,
@@ -98,18 +99,27 @@ pub fn sphere_embedding(
     let bad = |p: &[[f64; 3]]| {
         lf.iter()
             .filter(|f| {
+                // det[a, b, c] = det[b − a, c − a, a]: edge vectors keep the digits of a tiny
+                // triangle that the cancellation in a·(b × c) would lose.
                 let [a, b, c] = f.map(|v| p[v as usize]);
-                !is_positive(dot(a, cross(b, c)))
+                !is_positive(dot(a, cross(sub(b, a), sub(c, a))))
             })
             .count()
     };
     let (p0, p1) = (lift(s, false), lift(s, true));
     let (b0, b1) = (bad(&p0), bad(&p1));
-    let (mut pos, nbad) = if b0 <= b1 { (p0, b0) } else { (p1, b1) };
-    if nbad == 0 {
-        if let Some(nopts) = relax {
-            relax_on_sphere(&lp, &lf, &mut pos, nopts)?;
-        }
+    let (mut pos, mut nbad) = if b0 <= b1 { (p0, b0) } else { (p1, b1) };
+    if let Some(nopts) = relax {
+        // Tets whose four corners are all on the boundary are placed by the surface
+        // embedding alone: they belong to the surface problem.
+        let surface_tets: Vec<[u32; 4]> = mesh
+            .tets
+            .iter()
+            .filter(|t| t.iter().all(|&v| local[v as usize] != u32::MAX))
+            .map(|t| t.map(|v| local[v as usize]))
+            .collect();
+        relax_on_sphere(&lp, &lf, &surface_tets, &mut pos, nopts)?;
+        nbad = bad(&pos);
     }
     Ok((verts.iter().zip(pos).map(|(&v, p)| (v, p)).collect(), nbad))
 }
@@ -134,6 +144,7 @@ pub fn sphere_embedding(
 pub fn relax_on_sphere(
     rest: &[[f64; 3]],
     faces: &[[u32; 3]],
+    surface_tets: &[[u32; 4]],
     pos: &mut [[f64; 3]],
     opts: &NewtonOptions,
 ) -> Result<usize, VolError> {
@@ -160,39 +171,84 @@ pub fn relax_on_sphere(
         } else {
             return Ok(0); // a degenerate rest face: no reference shape, keep the embedding
         };
-        // Dm = [a − o, b − o, c − o] for the tet (o, a, b, c).
-        let e = [sub(a, apex), sub(b, apex), sub(c, apex)];
+        // The tet (a, c, b, o): det[c − a, b − a, o − a] = det[a, b, c] for o = 0, computed
+        // from edge vectors at a, so the sign of a tiny chordal triangle is not lost to the
+        // cancellation of three unit vectors' determinant (the orientation checks and the
+        // flip-free step bound use the first corner's edges).
+        let e = [sub(c, a), sub(b, a), sub(apex, a)];
         let dm = [0, 1, 2].map(|r| [e[0][r], e[1][r], e[2][r]]);
         let Some(inv) = inv3(&dm) else { return Ok(0) };
         d_dist.push(corner_weights(&inv));
-        weight.push(area(f) / total);
+        weight.push(det3(&dm) / 6.0);
     }
-    let tets: Vec<[u32; 4]> = faces.iter().map(|f| [centre, f[0], f[1], f[2]]).collect();
+    let mut tets: Vec<[u32; 4]> = faces.iter().map(|f| [f[0], f[2], f[1], centre]).collect();
+    // The mesh's tets with four boundary corners, against their rest shapes at the same scale
+    // k: the embedding must make them positive too, or no interior can (an "ear" tet with two
+    // boundary faces is positive only where the embedding is locally Delaunay across their
+    // shared edge).
+    for t in surface_tets {
+        let [a, b, c, d] = t.map(|v| rest[v as usize].map(|q| k * q));
+        let e = [sub(b, a), sub(c, a), sub(d, a)];
+        let dm = [0, 1, 2].map(|r| [e[0][r], e[1][r], e[2][r]]);
+        let Some(inv) = inv3(&dm) else { return Ok(0) };
+        d_dist.push(corner_weights(&inv));
+        weight.push(det3(&dm).abs() / 6.0);
+        tets.push(*t);
+    }
     let mut x = pos.to_vec();
     x.push([0.0; 3]);
     let mut fixed = vec![false; n + 1];
     fixed[n] = true;
     let mut on_sphere = vec![true; n + 1];
     on_sphere[n] = false;
-    let obj = Objective {
-        tets: tets.clone(),
-        weight,
-        d_fit: d_dist.clone(),
-        d_dist,
-        guide: vec![IDENTITY; faces.len()],
-        omega: 0.0,
-        targets: Vec::new(),
-        lambda: 0.0,
-        fixed,
-        on_sphere,
+    // First the cones alone (their start is positive unless rounding flipped a crowded
+    // triangle), then with the surface tets, which the relaxed embedding makes far easier to
+    // untangle than the crowded one; a stage that cannot end fold-free keeps the previous one.
+    let cones = faces.len();
+    let mut iterations = 0;
+    let stages = if tets.len() > cones {
+        vec![cones, tets.len()]
+    } else {
+        vec![cones]
     };
-    if !obj.value(&x).is_finite() {
-        return Ok(0);
+    for cells in stages {
+        let wsum: f64 = weight[..cells].iter().sum();
+        let obj = Objective {
+            tets: tets[..cells].to_vec(),
+            weight: weight[..cells].iter().map(|w| w / wsum).collect(),
+            d_fit: d_dist[..cells].to_vec(),
+            d_dist: d_dist[..cells].to_vec(),
+            guide: vec![IDENTITY; cells],
+            omega: 0.0,
+            targets: Vec::new(),
+            lambda: 0.0,
+            fixed: fixed.clone(),
+            on_sphere: on_sphere.clone(),
+        };
+        let mut y = x.clone();
+        if !obj.value(&y).is_finite() {
+            // Inverted cells: untangle them, sliding, with the energy that is finite for
+            // inverted cells.
+            let s = untangle_cells(
+                &obj.tets,
+                obj.d_dist.clone(),
+                obj.weight.clone(),
+                &mut y,
+                &obj.fixed,
+                &obj.on_sphere,
+                &UntangleOptions::default(),
+                Instant::now(),
+            )?;
+            if s.inverted > 0 || !obj.value(&y).is_finite() {
+                break;
+            }
+        }
+        let pattern = Pattern::new(n + 1, &obj.tets);
+        iterations += newton(&obj, &pattern, &mut y, opts, &mut |_, _| {})?.iterations;
+        x = y;
     }
-    let pattern = Pattern::new(n + 1, &tets);
-    let st = newton(&obj, &pattern, &mut x, opts, &mut |_, _| {})?;
     pos.copy_from_slice(&x[..n]);
-    Ok(st.iterations)
+    Ok(iterations)
 }
 
 /// Start map and constraints of the ball target: sphere boundary, harmonic interior.
@@ -255,6 +311,32 @@ pub fn slide_on_sphere(
     let fixed = vec![false; x.len()];
     let inverted_start = mesh.inverted(&x).len();
     let s = untangle_sliding(mesh, &mut x, &fixed, &on_sphere, opts)?;
+    if std::env::var_os("FOLDFREE_VOL_TRACE").is_some() {
+        let bfaces: std::collections::HashSet<[u32; 3]> = mesh
+            .boundary_faces()
+            .into_iter()
+            .map(|mut f| {
+                f.sort_unstable();
+                f
+            })
+            .collect();
+        // Inverted tets left, by (corners on the boundary, boundary faces).
+        let mut kinds = std::collections::BTreeMap::new();
+        for t in mesh.inverted(&x) {
+            let tet = mesh.tets[t];
+            let nb = tet.iter().filter(|&&v| on_sphere[v as usize]).count();
+            let nf = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]
+                .iter()
+                .filter(|f| {
+                    let mut k = f.map(|i| tet[i]);
+                    k.sort_unstable();
+                    bfaces.contains(&k)
+                })
+                .count();
+            *kinds.entry((nb, nf)).or_insert(0usize) += 1;
+        }
+        eprintln!("ball untangle: inverted left by (boundary corners, boundary faces): {kinds:?}");
+    }
     let mut report = SlideReport {
         inverted_start,
         inverted_left: s.inverted,

@@ -281,6 +281,52 @@ pub fn untangle_sliding(
             rest.positions.len()
         )));
     }
+    let mut d = Vec::with_capacity(rest.tets.len());
+    let mut vol = Vec::with_capacity(rest.tets.len());
+    for (i, t) in rest.tets.iter().enumerate() {
+        let a = rest.positions[t[0] as usize];
+        let e: Vec<[f64; 3]> = (1..4)
+            .map(|k| sub(rest.positions[t[k] as usize], a))
+            .collect();
+        let dm = [
+            [e[0][0], e[1][0], e[2][0]],
+            [e[0][1], e[1][1], e[2][1]],
+            [e[0][2], e[1][2], e[2][2]],
+        ];
+        let inv = inv3(&dm).ok_or_else(|| {
+            VolError::Input(format!("rest tet {i} is degenerate (singular edge matrix)"))
+        })?;
+        d.push(corner_weights(&inv));
+        vol.push(det3(&dm).abs());
+    }
+    untangle_cells(&rest.tets, d, vol, x, fixed, on_sphere, opts, start)
+}
+
+/// [`untangle_sliding`] on cells given by their corner weights `d` (J = Xᵀ·D) and reference
+/// volumes instead of a rest mesh: the ball target's spherical embedding untangles its cone
+/// tets (centre + boundary face), whose reference shapes share no rest vertex positions.
+#[allow(clippy::too_many_arguments)]
+pub fn untangle_cells(
+    tets: &[[u32; 4]],
+    mut d: Vec<Corner>,
+    vol: Vec<f64>,
+    x: &mut [[f64; 3]],
+    fixed: &[bool],
+    on_sphere: &[bool],
+    opts: &UntangleOptions,
+    start: Instant,
+) -> Result<UntangleStats, VolError> {
+    let nv = x.len();
+    if tets.len() != d.len()
+        || tets.len() != vol.len()
+        || fixed.len() != nv
+        || !(on_sphere.is_empty() || on_sphere.len() == nv)
+        || tets.iter().flatten().any(|&v| v as usize >= nv)
+    {
+        return Err(VolError::Input(
+            "untangle: cells, corner weights and volumes disagree".into(),
+        ));
+    }
     let sliding: Vec<usize> = (0..on_sphere.len())
         .filter(|&v| on_sphere[v] && !fixed[v])
         .collect();
@@ -308,32 +354,12 @@ pub fn untangle_sliding(
             }
         }
     };
-    let mut d = Vec::with_capacity(rest.tets.len());
-    let mut vol = Vec::with_capacity(rest.tets.len());
-    for (i, t) in rest.tets.iter().enumerate() {
-        let a = rest.positions[t[0] as usize];
-        let e: Vec<[f64; 3]> = (1..4)
-            .map(|k| sub(rest.positions[t[k] as usize], a))
-            .collect();
-        let dm = [
-            [e[0][0], e[1][0], e[2][0]],
-            [e[0][1], e[1][1], e[2][1]],
-            [e[0][2], e[1][2], e[2][2]],
-        ];
-        let inv = inv3(&dm).ok_or_else(|| {
-            VolError::Input(format!("rest tet {i} is degenerate (singular edge matrix)"))
-        })?;
-        d.push(corner_weights(&inv));
-        vol.push(det3(&dm).abs());
-    }
     let total: f64 = vol.iter().sum();
     // The volume term wants det J = 1, but with the boundary fixed the sum of signed volumes
     // of x is fixed too (it is the volume the boundary encloses): measure J against the rest
     // shape scaled to that volume, so that det J = 1 is attainable on average (e.g. a hand
     // mapped onto a unit ball).
-    let enclosed: f64 = (0..rest.tets.len())
-        .map(|t| super::tet::det6(x, &rest.tets[t]))
-        .sum();
+    let enclosed: f64 = tets.iter().map(|t| super::tet::det6(x, t)).sum();
     let scale = if enclosed > 0.0 && enclosed.is_finite() {
         (enclosed / total).cbrt()
     } else {
@@ -347,7 +373,7 @@ pub fn untangle_sliding(
         }
     }
     let prob = Problem::new(
-        &rest.tets,
+        tets,
         d,
         vol.iter().map(|v| v / total).collect(),
         fixed,
@@ -355,8 +381,7 @@ pub fn untangle_sliding(
     );
     let mut sc = Scratch::default();
     let mut evals = 0usize;
-    let inverted_pinned = rest
-        .tets
+    let inverted_pinned = tets
         .iter()
         .filter(|t| {
             t.iter().all(|&v| fixed[v as usize]) && !super::tet::is_positive(super::tet::det6(x, t))
@@ -367,7 +392,10 @@ pub fn untangle_sliding(
             eprintln!("untangle: {inverted_pinned} inverted tet(s) with all corners fixed");
         }
         return Ok(UntangleStats {
-            inverted: rest.inverted(x).len(),
+            inverted: tets
+                .iter()
+                .filter(|t| !super::tet::is_positive(super::tet::det6(x, t)))
+                .count(),
             inverted_pinned,
             seconds: start.elapsed().as_secs_f64(),
             ..Default::default()
