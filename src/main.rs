@@ -103,6 +103,17 @@ struct VolmapArgs {
     /// left it).
     #[arg(long, value_name = "N", default_value_t = 150)]
     ball_relax_iters: usize,
+    /// Where the untangler's per-tet energy and gradient run: `vulkan` (glsl/vol/untangle_tet.comp,
+    /// f32), `cpu` (f64), or `auto` (Vulkan on a real GPU, the CPU when the only device is a CPU
+    /// rasterizer such as lavapipe).
+    #[arg(long, value_enum, default_value = "auto")]
+    backend: BackendArg,
+    /// Vulkan device: a substring of its name or its index (see `foldfree devices`).
+    #[arg(long)]
+    device: Option<String>,
+    /// Enable the Khronos validation layer (any message fails the run).
+    #[arg(long)]
+    validation: bool,
     /// Write the constraints the map meets (`vertex x y z`), e.g. the sphere positions the
     /// ball target's boundary slid to, for `volcheck --constraints`.
     #[arg(long, value_name = "FILE")]
@@ -238,6 +249,9 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         quiet: a.quiet,
         max_tets: a.max_tets,
         options,
+        backend: backend_of(a.backend),
+        device: a.device,
+        validation: a.validation,
     };
     let r = run_volmap_job(&job)?;
     let q = &r.written;

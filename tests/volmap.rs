@@ -430,8 +430,15 @@ fn ball_boundary_slides_to_untangle_all_boundary_tets() {
     sphere.swap(0, 7);
     let targets: Vec<(u32, [f64; 3])> = (0..8).map(|v| (v, sphere[v as usize])).collect();
     assert!(!m.inverted(&sphere).is_empty(), "the test start must fold");
-    let (x, slid, r) =
-        slide_on_sphere(&m, &sphere, &targets, &UntangleOptions::default(), None).unwrap();
+    let (x, slid, r) = slide_on_sphere(
+        &m,
+        &sphere,
+        &targets,
+        &UntangleOptions::default(),
+        None,
+        None,
+    )
+    .unwrap();
     assert!(r.inverted_start > 0);
     assert_eq!(r.inverted_left, 0);
     assert!(m.inverted(&x).is_empty());
@@ -446,6 +453,7 @@ fn ball_boundary_slides_to_untangle_all_boundary_tets() {
         &targets,
         &UntangleOptions::default(),
         Some(&relax),
+        None,
     )
     .unwrap();
     assert!(m.inverted(&y).is_empty());

@@ -19,6 +19,7 @@
 #![deny(clippy::undocumented_unsafe_blocks)]
 #![deny(clippy::multiple_unsafe_ops_per_block)]
 
+mod backend;
 mod buffer;
 mod command;
 mod context;
@@ -31,6 +32,7 @@ mod query;
 mod render;
 pub mod shaders;
 
+pub use backend::{open_backend, BackendChoice};
 pub use buffer::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
 pub use command::{grid_1d, Access, Recorder};
 pub use context::{

@@ -17,14 +17,7 @@ use crate::param::Energy;
 use crate::report::ParamReport;
 use crate::{Error, Result};
 
-/// Where ADMM runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BackendChoice {
-    /// Vulkan on a real GPU; the CPU backend when the only device is a CPU rasterizer or none.
-    Auto,
-    Cpu,
-    Vulkan,
-}
+pub use crate::gpu::BackendChoice;
 
 /// When `foldfree param` cuts the mesh into disk charts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -118,32 +111,13 @@ pub struct ParamOutput {
     pub report: ParamReport,
 }
 
-/// Opens a Vulkan context for `job`, or says why the CPU backend runs instead.
+/// Opens a Vulkan context for `job`, or None for the CPU backend.
 fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
-    use crate::gpu::{Context, ContextDesc};
-    let desc = ContextDesc {
-        validation: job.validation,
-        device: job.device.clone(),
-        ..ContextDesc::default()
-    };
-    let named = job.device.is_some()
-        || std::env::var(crate::gpu::DEVICE_ENV).is_ok_and(|s| !s.trim().is_empty());
-    match job.backend {
-        BackendChoice::Cpu => Ok(None),
-        BackendChoice::Vulkan => Ok(Some(Context::new(&desc)?)),
-        BackendChoice::Auto => match Context::new(&desc) {
-            // A device the user named (`--device` or the environment) is a request: it runs
-            // there (even lavapipe) or fails.
-            Ok(ctx) if named => Ok(Some(ctx)),
-            // A CPU "GPU" (lavapipe) is slower than the native f64 backend on the same cores.
-            Ok(ctx) if ctx.device_type() == crate::gpu::vk::PhysicalDeviceType::CPU => Ok(None),
-            Ok(ctx) => Ok(Some(ctx)),
-            // Falling back to the CPU silently would ignore a named device or the validation
-            // the user asked for.
-            Err(e) if e.is_unavailable() && !named && !job.validation => Ok(None),
-            Err(e) => Err(e.into()),
-        },
-    }
+    Ok(crate::gpu::open_backend(
+        job.backend,
+        job.device.as_deref(),
+        job.validation,
+    )?)
 }
 
 /// `foldfree param`: check the outputs, load and validate, normalise the scale, start map,

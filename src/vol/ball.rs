@@ -238,6 +238,7 @@ pub fn relax_on_sphere(
                 &obj.on_sphere,
                 &UntangleOptions::default(),
                 Instant::now(),
+                None,
             )?;
             if s.inverted > 0 || !obj.value(&y).is_finite() {
                 break;
@@ -301,6 +302,7 @@ pub fn slide_on_sphere(
     targets: &Targets,
     opts: &UntangleOptions,
     relax: Option<&NewtonOptions>,
+    device: Option<&crate::gpu::Context>,
 ) -> Result<(Vec<[f64; 3]>, Targets, SlideReport), VolError> {
     let mut x = start.to_vec();
     let mut on_sphere = vec![false; x.len()];
@@ -310,7 +312,7 @@ pub fn slide_on_sphere(
     }
     let fixed = vec![false; x.len()];
     let inverted_start = mesh.inverted(&x).len();
-    let s = untangle_sliding(mesh, &mut x, &fixed, &on_sphere, opts)?;
+    let s = untangle_sliding(mesh, &mut x, &fixed, &on_sphere, opts, device)?;
     if std::env::var_os("FOLDFREE_VOL_TRACE").is_some() {
         let bfaces: std::collections::HashSet<[u32; 3]> = mesh
             .boundary_faces()

@@ -69,6 +69,10 @@ pub enum VolError {
     /// An input cannot be read, or an output path is unusable.
     #[error(transparent)]
     File(#[from] crate::files::FileError),
+    /// `--backend vulkan`: no device, a named device that is absent (exit 2), or a device
+    /// failure (exit 1).
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
 }
 
 impl VolError {
@@ -77,6 +81,8 @@ impl VolError {
         match self {
             VolError::Io { .. } | VolError::Solve(_) | VolError::BadResult(_) => 1,
             VolError::File(e) => e.exit_code(),
+            VolError::Gpu(crate::gpu::GpuError::NoSuchDevice(_)) => 2,
+            VolError::Gpu(_) => 1,
             _ => 2,
         }
     }

@@ -12,7 +12,7 @@ use super::harmonic::harmonic_extension;
 use super::tetgen::{
     files_of, output_texts, parse_output, read_any_with_limit, tet_input, tet_output,
 };
-use super::volmap::{evaluate, volmap, MapQuality, VolmapOptions, VolmapReport};
+use super::volmap::{evaluate, volmap_on, MapQuality, VolmapOptions, VolmapReport};
 use super::{TetMesh, VolError};
 use crate::files::Outputs;
 use crate::mesh::Scale;
@@ -42,6 +42,11 @@ pub struct VolmapJob {
     /// Refuse meshes of more tets (and files larger than such a mesh's text).
     pub max_tets: usize,
     pub options: VolmapOptions,
+    /// Where the untangler's per-tet terms run (`--backend`); `device` names a Vulkan device,
+    /// `validation` turns on the validation layer.
+    pub backend: crate::gpu::BackendChoice,
+    pub device: Option<String>,
+    pub validation: bool,
 }
 
 /// The JSON written by `--report`.
@@ -51,6 +56,8 @@ pub struct VolmapFileReport {
     pub init: Option<String>,
     pub output: String,
     pub constraints: String,
+    /// Where the untangler's per-tet terms ran: "cpu", or the Vulkan device's name.
+    pub backend: String,
     /// Ball target: boundary triangles not positive seen from the centre (0 = star-shaped).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sphere_nonpositive_faces: Option<usize>,
@@ -139,6 +146,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         outputs.output(p, "constraints", &[])?;
     }
     let rest_file = read_rest(&job.rest, job.max_tets)?;
+    let ctx = crate::gpu::open_backend(job.backend, job.device.as_deref(), job.validation)?;
     let init_file = match &job.init {
         Some(p) => Some(read_map(&rest_file, &job.rest, p)?),
         None => None,
@@ -166,8 +174,14 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
             let start = init_pos.unwrap_or(start);
             match &job.options.untangle {
                 Some(u) => {
-                    let (x, slid, s) =
-                        slide_on_sphere(&rest, &start, &t, u, job.options.ball_relax.as_ref())?;
+                    let (x, slid, s) = slide_on_sphere(
+                        &rest,
+                        &start,
+                        &t,
+                        u,
+                        job.options.ball_relax.as_ref(),
+                        ctx.as_ref(),
+                    )?;
                     let ok = s.inverted_left == 0;
                     sliding = Some(s);
                     if ok {
@@ -204,16 +218,34 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         b
     };
     let mut current = String::new();
-    let out = volmap(&rest, &init, &targets, &job.options, &mut |phase, it, e| {
-        if phase != current {
-            current = phase.to_string();
-            bar.set_prefix(current.clone());
-        }
-        bar.set_position(it as u64);
-        bar.set_message(format!("E {e:.6e}"));
-    });
+    let out = volmap_on(
+        &rest,
+        &init,
+        &targets,
+        &job.options,
+        ctx.as_ref(),
+        &mut |phase, it, e| {
+            if phase != current {
+                current = phase.to_string();
+                bar.set_prefix(current.clone());
+            }
+            bar.set_position(it as u64);
+            bar.set_message(format!("E {e:.6e}"));
+        },
+    );
     bar.finish_and_clear();
     let (x, mut run) = out?;
+    if let Some(ctx) = &ctx {
+        let messages = ctx.take_validation_messages();
+        if !messages.is_empty() {
+            return Err(crate::gpu::GpuError::Invalid(format!(
+                "{} Vulkan validation messages, first: {}",
+                messages.len(),
+                messages[0]
+            ))
+            .into());
+        }
+    }
     let x: Vec<[f64; 3]> = x.iter().map(|&p| scale.invert(p)).collect();
     let texts = output_texts(&job.output, &rest_file, &x)?;
     // Independent check of what will be written: parsed back from the text, judged at the
@@ -250,6 +282,9 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
             ConstraintSource::File(p) => p.display().to_string(),
             ConstraintSource::Ball => "ball".into(),
         },
+        backend: ctx
+            .as_ref()
+            .map_or_else(|| "cpu".to_string(), |c| c.device_name().to_string()),
         sphere_nonpositive_faces: sphere_bad,
         sphere_sliding: sliding,
         run,

@@ -15,7 +15,7 @@ use super::newton::{
     corner_weights, jacobian, newton, position_energy, NewtonOptions, Objective, Pattern,
 };
 use super::tet::{sub, TetMesh};
-use super::untangle::{untangle, UntangleOptions};
+use super::untangle::{untangle_sliding, UntangleOptions};
 use super::VolError;
 
 /// Parameters of the method (defaults: the paper's).
@@ -332,6 +332,18 @@ pub fn volmap(
     opts: &VolmapOptions,
     progress: &mut dyn FnMut(&str, usize, f64),
 ) -> Result<(Vec<[f64; 3]>, VolmapReport), VolError> {
+    volmap_on(rest, init, targets, opts, None, progress)
+}
+
+/// [`volmap`] with the untangler's per-tet terms on `device` (None: the CPU).
+pub fn volmap_on(
+    rest: &TetMesh,
+    init: &[[f64; 3]],
+    targets: &[(u32, [f64; 3])],
+    opts: &VolmapOptions,
+    device: Option<&crate::gpu::Context>,
+    progress: &mut dyn FnMut(&str, usize, f64),
+) -> Result<(Vec<[f64; 3]>, VolmapReport), VolError> {
     let start = Instant::now();
     let nv = rest.positions.len();
     if init.len() != nv {
@@ -424,7 +436,7 @@ pub fn volmap(
             y[*v as usize] = *p;
             fixed[*v as usize] = true;
         }
-        let s = untangle(rest, &mut y, &fixed, u)?;
+        let s = untangle_sliding(rest, &mut y, &fixed, &[], u, device)?;
         phases.push(PhaseReport {
             name: format!(
                 "untangle ({} inverted left, {} with all corners fixed)",

@@ -24,6 +24,10 @@ use rayon::prelude::*;
 
 use super::energy::{det3, frob2, inv3, Mat3};
 use super::newton::{corner_weights, jacobian, Corner};
+use crate::gpu::Context;
+use vulkan::DeviceTets;
+
+pub mod vulkan;
 use super::tet::{sub, to_unit_sphere, TetMesh};
 use super::VolError;
 
@@ -120,6 +124,27 @@ pub fn untangle_energy(j: &Mat3, eps: f64, theta: f64) -> (f64, Mat3) {
     (f, g)
 }
 
+/// One tet's weighted energy and gradient over its 12 corner coordinates (corner j,
+/// coordinate r at 3j + r): the CPU f64 twin of `glsl/vol/untangle_tet.comp`.
+pub fn tet_terms(
+    x: &[[f64; 3]],
+    tet: &[u32; 4],
+    d: &Corner,
+    w: f64,
+    eps: f64,
+    theta: f64,
+) -> (f64, [f64; 12]) {
+    let j = jacobian(x, tet, d);
+    let (f, p) = untangle_energy(&j, eps, theta);
+    let mut g = [0.0; 12];
+    for c in 0..4 {
+        for r in 0..3 {
+            g[3 * c + r] = w * (p[r][0] * d[c][0] + p[r][1] * d[c][1] + p[r][2] * d[c][2]);
+        }
+    }
+    (w * f, g)
+}
+
 /// The untangling energy over a tet mesh with per-tet reference data, evaluated with reused
 /// buffers: per-tet terms in parallel (rayon), then the gradient gathered per vertex from its
 /// incident (tet, corner) slots in a fixed order and the energy summed in tet order, so the
@@ -136,11 +161,12 @@ struct Problem<'a> {
     inc: Vec<u32>,
 }
 
-/// Per-tet results of one evaluation.
+/// Per-tet results of one evaluation, and the device that computes them (None: the CPU).
 #[derive(Default)]
 struct Scratch {
     f: Vec<f64>,
     g: Vec<[f64; 12]>,
+    device: Option<DeviceTets>,
 }
 
 impl<'a> Problem<'a> {
@@ -187,36 +213,41 @@ impl<'a> Problem<'a> {
             .collect()
     }
 
-    fn value(&self, x: &[[f64; 3]], eps: f64, sc: &mut Scratch) -> f64 {
-        sc.f.resize(self.tets.len(), 0.0);
-        sc.f.par_iter_mut().enumerate().for_each(|(t, f)| {
-            let j = jacobian(x, &self.tets[t], &self.d[t]);
-            *f = self.w[t] * untangle_energy(&j, eps, self.theta).0;
-        });
-        sc.f.iter().sum()
+    fn value(&self, x: &[[f64; 3]], eps: f64, sc: &mut Scratch) -> Result<f64, VolError> {
+        let mut g = vec![0.0; 3 * x.len()];
+        self.value_grad(x, eps, &mut g, sc)
     }
 
     /// Value and gradient (zero on fixed vertices), flattened 3n.
-    fn value_grad(&self, x: &[[f64; 3]], eps: f64, g: &mut [f64], sc: &mut Scratch) -> f64 {
+    fn value_grad(
+        &self,
+        x: &[[f64; 3]],
+        eps: f64,
+        g: &mut [f64],
+        sc: &mut Scratch,
+    ) -> Result<f64, VolError> {
         let nt = self.tets.len();
         sc.f.resize(nt, 0.0);
         sc.g.resize(nt, [0.0; 12]);
-        sc.f.par_iter_mut()
-            .zip(sc.g.par_iter_mut())
-            .enumerate()
-            .for_each(|(t, (fo, go))| {
-                let d = &self.d[t];
-                let j = jacobian(x, &self.tets[t], d);
-                let (f, p) = untangle_energy(&j, eps, self.theta);
-                let w = self.w[t];
+        if let Some(dev) = &mut sc.device {
+            let (f, gd) = dev.evaluate(x, eps, self.theta)?;
+            for t in 0..nt {
+                sc.f[t] = f64::from(f[t]);
                 for c in 0..4 {
                     for r in 0..3 {
-                        go[3 * c + r] =
-                            w * (p[r][0] * d[c][0] + p[r][1] * d[c][1] + p[r][2] * d[c][2]);
+                        sc.g[t][3 * c + r] = f64::from(gd[4 * t + c][r]);
                     }
                 }
-                *fo = w * f;
-            });
+            }
+        } else {
+            sc.f.par_iter_mut()
+                .zip(sc.g.par_iter_mut())
+                .enumerate()
+                .for_each(|(t, (fo, go))| {
+                    (*fo, *go) =
+                        tet_terms(x, &self.tets[t], &self.d[t], self.w[t], eps, self.theta);
+                });
+        }
         let gl = &sc.g;
         g.par_chunks_mut(3).enumerate().for_each(|(v, gv)| {
             gv.iter_mut().for_each(|q| *q = 0.0);
@@ -230,7 +261,7 @@ impl<'a> Problem<'a> {
                 }
             }
         });
-        sc.f.iter().sum()
+        Ok(sc.f.iter().sum())
     }
 }
 
@@ -247,7 +278,7 @@ pub fn untangle(
     fixed: &[bool],
     opts: &UntangleOptions,
 ) -> Result<UntangleStats, VolError> {
-    untangle_sliding(rest, x, fixed, &[], opts)
+    untangle_sliding(rest, x, fixed, &[], opts, None)
 }
 
 /// [`untangle`] where the vertices with `on_sphere[v]` (an empty slice: none) slide on the
@@ -260,12 +291,15 @@ pub fn untangle(
 /// tets spanning a finger with only boundary corners) some are inverted by the embedding
 /// itself and no interior placement can repair them. Letting the boundary slide on the
 /// sphere makes the sphere, not one embedding of it, the constraint.
+///
+/// `device`: evaluate the per-tet terms there ([`vulkan`]) instead of on the CPU.
 pub fn untangle_sliding(
     rest: &TetMesh,
     x: &mut [[f64; 3]],
     fixed: &[bool],
     on_sphere: &[bool],
     opts: &UntangleOptions,
+    device: Option<&Context>,
 ) -> Result<UntangleStats, VolError> {
     let start = Instant::now();
     let nv = x.len();
@@ -299,7 +333,7 @@ pub fn untangle_sliding(
         d.push(corner_weights(&inv));
         vol.push(det3(&dm).abs());
     }
-    untangle_cells(&rest.tets, d, vol, x, fixed, on_sphere, opts, start)
+    untangle_cells(&rest.tets, d, vol, x, fixed, on_sphere, opts, start, device)
 }
 
 /// [`untangle_sliding`] on cells given by their corner weights `d` (J = Xᵀ·D) and reference
@@ -315,6 +349,7 @@ pub fn untangle_cells(
     on_sphere: &[bool],
     opts: &UntangleOptions,
     start: Instant,
+    device: Option<&Context>,
 ) -> Result<UntangleStats, VolError> {
     let nv = x.len();
     if tets.len() != d.len()
@@ -379,7 +414,13 @@ pub fn untangle_cells(
         fixed,
         opts.theta,
     );
-    let mut sc = Scratch::default();
+    let mut sc = Scratch {
+        device: match device {
+            Some(ctx) => Some(DeviceTets::new(ctx, prob.tets, &prob.d, &prob.w, nv)?),
+            None => None,
+        },
+        ..Scratch::default()
+    };
     let mut evals = 0usize;
     let inverted_pinned = tets
         .iter()
@@ -412,7 +453,7 @@ pub fn untangle_cells(
         // for this energy's (the post-optimisation minimises the measured one).
         return Ok(UntangleStats {
             min_det: detmin,
-            energy: prob.value(x, 1e-10, &mut sc),
+            energy: prob.value(x, 1e-10, &mut sc)?,
             eps: 1e-10,
             seconds: start.elapsed().as_secs_f64(),
             ..Default::default()
@@ -427,7 +468,7 @@ pub fn untangle_cells(
     let mut trial = x.to_vec();
     for outer in 0..opts.max_outer {
         stats.outer = outer + 1;
-        let mut e = prob.value_grad(x, eps, &mut g, &mut sc);
+        let mut e = prob.value_grad(x, eps, &mut g, &mut sc)?;
         let e_prev = e;
         project(x, &mut g);
         let mut s_hist: Vec<Vec<f64>> = Vec::new();
@@ -489,7 +530,7 @@ pub fn untangle_cells(
                     }
                 }
                 retract(&mut trial);
-                let et = prob.value_grad(&trial, eps, &mut g_new, &mut sc);
+                let et = prob.value_grad(&trial, eps, &mut g_new, &mut sc)?;
                 project(&trial, &mut g_new);
                 if et.is_finite() && et <= e + 1e-4 * t * slope {
                     accepted = Some(et);
