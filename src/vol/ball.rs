@@ -354,6 +354,12 @@ pub fn slide_on_sphere(
     if let (Some(nopts), 0) = (relax, s.inverted) {
         let t0 = Instant::now();
         let obj = distortion_objective(mesh, fixed, on_sphere)?;
+        if !obj.value(&x).is_finite() {
+            // The untangler's last ε left a tet positive by its own test but with a
+            // distortion that overflows: keep the untangled map unrelaxed.
+            let slid = targets.iter().map(|(v, _)| (*v, x[*v as usize])).collect();
+            return Ok((x, slid, report));
+        }
         let pattern = Pattern::new(x.len(), &mesh.tets);
         report.delta_t_before_relax = Some(obj.tet_energy(&x));
         let st = newton(&obj, &pattern, &mut x, nopts, &mut |_, _| {})?;

@@ -370,7 +370,10 @@ pub fn volmap_on(
         .zip(&rd.dm_inv)
         .map(|(t, inv)| {
             let j = mul3(&edge_matrix(init, t), inv);
-            if super::energy::det3(&j) > 0.0 && inv3(&j).is_some() {
+            // A guide must be a positive Jacobian whose distortion is finite both ways: a tet
+            // the init crushed to a subnormal volume has an inverse that overflows, and the
+            // deformation would start at an infinite energy.
+            if super::energy::det3(&j) > 0.0 && sym_dirichlet(&j).is_finite() {
                 j
             } else {
                 IDENTITY
