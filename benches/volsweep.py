@@ -37,7 +37,7 @@ from collections import Counter
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from sweep import kill_group, last_error_line  # noqa: E402  (one process-group helper, not two)
+from sweep import fmt as sweep_fmt, kill_group, last_error_line  # noqa: E402  (one copy of each)
 
 RHO_MAX, SPHERE_MAX = 1e-6, 1e-9
 
@@ -203,17 +203,10 @@ class VolSweep:
 # ---------------------------------------------------------------- table
 
 def fmt(x, kind=""):
-    if x is None:
-        return "–"
-    if isinstance(x, bool):
-        return "yes" if x else "no"
-    if kind == "e":
-        return f"{x:.2e}"
-    if kind == "g":
-        return f"{x:#.4g}"
-    if kind == "s":
-        return f"{x:.2f}"
-    return str(x)
+    """sweep.fmt, plus `e` (3 significant digits, exponent) and `g` (4 significant digits)."""
+    if x is not None and kind in ("e", "g"):
+        return f"{x:.2e}" if kind == "e" else f"{x:#.4g}"
+    return sweep_fmt(x, kind)
 
 
 def write_table(out):

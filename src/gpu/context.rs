@@ -512,6 +512,19 @@ impl Context {
         self.shared.messages.take()
     }
 
+    /// Takes the messages and fails when there were any: a run with the validation layer on
+    /// is a run that must stay silent.
+    pub fn check_validation_messages(&self) -> GpuResult<()> {
+        let messages = self.take_validation_messages();
+        match messages.first() {
+            None => Ok(()),
+            Some(first) => Err(GpuError::Invalid(format!(
+                "{} Vulkan validation messages, first: {first}",
+                messages.len()
+            ))),
+        }
+    }
+
     /// A handle on the message list that outlives the context: check it after dropping the
     /// context to see what the layer said during teardown (leaked objects).
     pub fn message_log(&self) -> MessageLog {

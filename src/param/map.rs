@@ -329,15 +329,7 @@ fn run_admm(
             let r = solve(&mut exec)?;
             out.kernel_times = exec.kernel_times().cloned();
             out.bytes_per_iteration = Some(exec.bytes_per_iteration());
-            let messages = ctx.take_validation_messages();
-            if !messages.is_empty() {
-                return Err(crate::gpu::GpuError::Invalid(format!(
-                    "{} Vulkan validation messages, first: {}",
-                    messages.len(),
-                    messages[0]
-                ))
-                .into());
-            }
+            ctx.check_validation_messages()?;
             Ok(r)
         }
         None => {

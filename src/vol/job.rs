@@ -236,15 +236,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     bar.finish_and_clear();
     let (x, mut run) = out?;
     if let Some(ctx) = &ctx {
-        let messages = ctx.take_validation_messages();
-        if !messages.is_empty() {
-            return Err(crate::gpu::GpuError::Invalid(format!(
-                "{} Vulkan validation messages, first: {}",
-                messages.len(),
-                messages[0]
-            ))
-            .into());
-        }
+        ctx.check_validation_messages()?;
     }
     let x: Vec<[f64; 3]> = x.iter().map(|&p| scale.invert(p)).collect();
     let texts = output_texts(&job.output, &rest_file, &x)?;

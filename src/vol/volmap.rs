@@ -417,7 +417,14 @@ pub fn volmap_on(
         if std::env::var_os("FOLDFREE_VOL_TRACE").is_some() {
             eprintln!("== {name} λ {}", obj.lambda);
         }
-        let s = newton(obj, &pattern, x, nopts, &mut |it, e| progress(name, it, e))?;
+        let s = newton(obj, &pattern, x, nopts, &mut |it, e| progress(name, it, e)).map_err(
+            |e| match e {
+                VolError::BadResult(m) => VolError::BadResult(format!(
+                    "{name} phase: {m}; no fold-free map was found, nothing was written"
+                )),
+                e => e,
+            },
+        )?;
         phases.push(PhaseReport {
             name: name.to_string(),
             iterations: s.iterations,
