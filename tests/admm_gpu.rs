@@ -19,6 +19,9 @@
 
 #[path = "common/gpu.rs"]
 mod gpu_common;
+#[path = "common/rng.rs"]
+mod rng;
+use rng::Rng;
 
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -87,28 +90,6 @@ const RESIDUAL_TOL: f64 = 1e-4;
 
 // ---------------------------------------------------------------------------------------------
 // Inputs
-
-/// xorshift64*: deterministic test randomness without a dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in [-1, 1).
-    fn sym(&mut self) -> f64 {
-        2.0 * self.next() - 1.0
-    }
-
-    /// Log-uniform in [lo, hi].
-    fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        (lo.ln() + self.next() * (hi.ln() - lo.ln())).exp()
-    }
-}
 
 /// A mesh and its ADMM problem (f32-representable: see [`round_problem`]).
 struct Fixture {

@@ -1,6 +1,9 @@
 //! Numerics: Krylov solvers, small dense helpers, starting maps (Tutte, LSCM) and metrics.
 //! Each test name states the property it checks.
 
+#[path = "common/rng.rs"]
+mod rng;
+use rng::Rng;
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
@@ -75,21 +78,6 @@ fn single_loop(faces: &[[u32; 3]]) -> Vec<u32> {
     let loops = boundary_loops(faces);
     assert_eq!(loops.len(), 1, "expected a disk");
     loops.into_iter().next().unwrap()
-}
-
-/// xorshift64*: deterministic test randomness without a dependency.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform in [-1, 1).
-    fn sym(&mut self) -> f64 {
-        2.0 * self.next() - 1.0
-    }
 }
 
 /// Random sparse symmetric positive definite matrix: a random graph Laplacian with random

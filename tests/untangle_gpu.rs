@@ -11,6 +11,9 @@
 
 #[path = "common/gpu.rs"]
 mod gpu_common;
+#[path = "common/rng.rs"]
+mod rng;
+use rng::Rng;
 
 use foldfree::vol::energy::inv3;
 use foldfree::vol::newton::{corner_weights, Corner};
@@ -23,20 +26,6 @@ use gpu_common::with_test_context;
 /// gradient entry. The kernel is f32 (χ^{1/3} through `pow`, several divisions): on lavapipe the
 /// worst measured difference is printed; a wrong formula or binding is off by O(1).
 const TOL: f64 = 2e-4;
-
-/// xorshift64*: deterministic, dependency-free.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.next()
-    }
-}
 
 fn f32r(p: [f64; 3]) -> [f64; 3] {
     p.map(|c| f64::from(c as f32))
