@@ -15,8 +15,7 @@ mod gpu_common;
 mod rng;
 use rng::Rng;
 
-use foldfree::vol::energy::inv3;
-use foldfree::vol::newton::{corner_weights, Corner};
+use foldfree::vol::newton::{corners_of, Corner};
 use foldfree::vol::untangle::vulkan::DeviceTets;
 use foldfree::vol::untangle::{tet_terms, untangle_sliding, UntangleOptions};
 use foldfree::vol::TetMesh;
@@ -33,15 +32,7 @@ fn f32r(p: [f64; 3]) -> [f64; 3] {
 
 /// Corner weights of a rest tet, rounded to f32 like the upload.
 fn weights_of(rest: &[[f64; 3]], t: &[u32; 4]) -> Option<Corner> {
-    let a = rest[t[0] as usize];
-    let e: Vec<[f64; 3]> = (1..4)
-        .map(|k| {
-            let b = rest[t[k] as usize];
-            [b[0] - a[0], b[1] - a[1], b[2] - a[2]]
-        })
-        .collect();
-    let dm = [0, 1, 2].map(|r| [e[0][r], e[1][r], e[2][r]]);
-    let d = corner_weights(&inv3(&dm)?);
+    let (d, _) = corners_of(t.map(|v| rest[v as usize]))?;
     Some(d.map(|row| row.map(|v| f64::from(v as f32))))
 }
 

@@ -550,21 +550,15 @@ fn sphere_relaxation_spreads_a_crowded_embedding() {
         ]
     };
     let mut pos: Vec<[f64; 3]> = rest.iter().map(|&p| crowd(p)).collect();
+    // Signed chordal areas: positive when the triangle faces away from the centre.
     let areas = |p: &[[f64; 3]]| -> Vec<f64> {
+        use foldfree::vol::tet::{cross, dot, sub};
         faces
             .iter()
             .map(|f| {
                 let [a, b, c] = f.map(|v| p[v as usize]);
-                let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-                let w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-                let n = [
-                    u[1] * w[2] - u[2] * w[1],
-                    u[2] * w[0] - u[0] * w[2],
-                    u[0] * w[1] - u[1] * w[0],
-                ];
-                // Signed: positive when the triangle faces away from the centre.
-                0.5 * (n[0] * a[0] + n[1] * a[1] + n[2] * a[2]).signum()
-                    * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+                let n = cross(sub(b, a), sub(c, a));
+                0.5 * dot(n, a).signum() * dot(n, n).sqrt()
             })
             .collect()
     };

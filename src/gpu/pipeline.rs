@@ -89,6 +89,20 @@ impl std::fmt::Debug for ComputePipeline {
 }
 
 impl ComputePipeline {
+    /// The pipeline of one of the crate's shaders (`shaders::NAME` bytes) with `bindings`
+    /// storage buffers and a push-constant block of type `P`.
+    pub fn from_shader<P>(
+        ctx: &Context,
+        name: &str,
+        spv: &[u8],
+        bindings: u32,
+    ) -> GpuResult<ComputePipeline> {
+        let words = super::shaders::words(spv)?;
+        let push = u32::try_from(std::mem::size_of::<P>())
+            .map_err(|_| GpuError::Invalid(format!("{name}: push constants too large")))?;
+        ComputePipeline::new(ctx, &ComputePipelineDesc::new(name, &words, bindings, push))
+    }
+
     /// Builds the pipeline. Takes under a millisecond on lavapipe for our kernels.
     pub fn new(ctx: &Context, desc: &ComputePipelineDesc<'_>) -> GpuResult<ComputePipeline> {
         let limits = ctx.limits();

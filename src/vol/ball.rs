@@ -10,9 +10,9 @@
 
 use std::path::Path;
 
-use super::energy::{det3, inv3, IDENTITY};
+use super::energy::IDENTITY;
 use super::harmonic::harmonic_extension;
-use super::newton::{corner_weights, newton, NewtonOptions, Objective, Pattern};
+use super::newton::{corners_of, newton, NewtonOptions, Objective, Pattern};
 use super::tet::{cross, dot, is_positive, sub, TetMesh};
 use super::untangle::{untangle_cells, untangle_sliding, UntangleOptions};
 use super::volmap::distortion_objective;
@@ -128,7 +128,7 @@ pub fn sphere_embedding(
 /// `faces`), every vertex sliding on the unit sphere, and keeps it fold-free.
 ///
 /// Why: a Tutte or conformal embedding shrinks a protrusion's area exponentially in its
-/// length-to-width ratio (a fingertip of a hand ends up at 1e-10 of the sphere), and tets
+/// length-to-width ratio, to areas below the resolution of the coordinates), and tets
 /// there are then numerically degenerate: det J and its gradient (the cofactors of a rank ≤ 1
 /// Jacobian) both vanish, so no untangler can move them. Minimising a distortion that
 /// penalises compression as much as stretch spreads every region to about its share of the
@@ -175,11 +175,11 @@ pub fn relax_on_sphere(
         // from edge vectors at a, so the sign of a tiny chordal triangle is not lost to the
         // cancellation of three unit vectors' determinant (the orientation checks and the
         // flip-free step bound use the first corner's edges).
-        let e = [sub(c, a), sub(b, a), sub(apex, a)];
-        let dm = [0, 1, 2].map(|r| [e[0][r], e[1][r], e[2][r]]);
-        let Some(inv) = inv3(&dm) else { return Ok(0) };
-        d_dist.push(corner_weights(&inv));
-        weight.push(det3(&dm) / 6.0);
+        let Some((d, det)) = corners_of([a, c, b, apex]) else {
+            return Ok(0);
+        };
+        d_dist.push(d);
+        weight.push(det / 6.0);
     }
     let mut tets: Vec<[u32; 4]> = faces.iter().map(|f| [f[0], f[2], f[1], centre]).collect();
     // The mesh's tets with four boundary corners, against their rest shapes at the same scale
@@ -187,12 +187,11 @@ pub fn relax_on_sphere(
     // boundary faces is positive only where the embedding is locally Delaunay across their
     // shared edge).
     for t in surface_tets {
-        let [a, b, c, d] = t.map(|v| rest[v as usize].map(|q| k * q));
-        let e = [sub(b, a), sub(c, a), sub(d, a)];
-        let dm = [0, 1, 2].map(|r| [e[0][r], e[1][r], e[2][r]]);
-        let Some(inv) = inv3(&dm) else { return Ok(0) };
-        d_dist.push(corner_weights(&inv));
-        weight.push(det3(&dm).abs() / 6.0);
+        let Some((d, det)) = corners_of(t.map(|v| rest[v as usize].map(|q| k * q))) else {
+            return Ok(0);
+        };
+        d_dist.push(d);
+        weight.push(det.abs() / 6.0);
         tets.push(*t);
     }
     let mut x = pos.to_vec();
@@ -237,7 +236,6 @@ pub fn relax_on_sphere(
                 &obj.fixed,
                 &obj.on_sphere,
                 &UntangleOptions::default(),
-                Instant::now(),
                 None,
             )?;
             if s.inverted > 0 || !obj.value(&y).is_finite() {
@@ -313,32 +311,6 @@ pub fn slide_on_sphere(
     let fixed = vec![false; x.len()];
     let inverted_start = mesh.inverted(&x).len();
     let s = untangle_sliding(mesh, &mut x, &fixed, &on_sphere, opts, device)?;
-    if std::env::var_os("FOLDFREE_VOL_TRACE").is_some() {
-        let bfaces: std::collections::HashSet<[u32; 3]> = mesh
-            .boundary_faces()
-            .into_iter()
-            .map(|mut f| {
-                f.sort_unstable();
-                f
-            })
-            .collect();
-        // Inverted tets left, by (corners on the boundary, boundary faces).
-        let mut kinds = std::collections::BTreeMap::new();
-        for t in mesh.inverted(&x) {
-            let tet = mesh.tets[t];
-            let nb = tet.iter().filter(|&&v| on_sphere[v as usize]).count();
-            let nf = [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]
-                .iter()
-                .filter(|f| {
-                    let mut k = f.map(|i| tet[i]);
-                    k.sort_unstable();
-                    bfaces.contains(&k)
-                })
-                .count();
-            *kinds.entry((nb, nf)).or_insert(0usize) += 1;
-        }
-        eprintln!("ball untangle: inverted left by (boundary corners, boundary faces): {kinds:?}");
-    }
     let mut report = SlideReport {
         inverted_start,
         inverted_left: s.inverted,

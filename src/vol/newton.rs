@@ -14,7 +14,7 @@
 use rayon::prelude::*;
 use sprs::CsMat;
 
-use super::energy::{sym_dirichlet, sym_dirichlet_grad, sym_dirichlet_hessian_psd, Mat3};
+use super::energy::{inv3, sym_dirichlet, sym_dirichlet_grad, sym_dirichlet_hessian_psd, Mat3};
 use super::line_search::max_flip_free_step;
 use super::VolError;
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
@@ -33,6 +33,19 @@ pub fn corner_weights(b: &Mat3) -> Corner {
         }
     }
     d
+}
+
+/// Dm = [p₁ − p₀, p₂ − p₀, p₃ − p₀] (columns) of the corners `p`.
+pub fn edge_matrix_of(p: [[f64; 3]; 4]) -> Mat3 {
+    let e = [1, 2, 3].map(|k| [0, 1, 2].map(|r| p[k][r] - p[0][r]));
+    [0, 1, 2].map(|r| [e[0][r], e[1][r], e[2][r]])
+}
+
+/// The corner weights D of the Jacobian against the reference tet with corners `p`
+/// (J = Xᵀ·D = Ds·Dm⁻¹) and det Dm (6 × its signed volume); None when Dm is singular.
+pub fn corners_of(p: [[f64; 3]; 4]) -> Option<(Corner, f64)> {
+    let dm = edge_matrix_of(p);
+    Some((corner_weights(&inv3(&dm)?), super::energy::det3(&dm)))
 }
 
 /// M = Xᵀ·D for the corners of `t` in `x`.

@@ -12,7 +12,8 @@ use serde::Serialize;
 use super::energy::{inv3, mul3, sym_dirichlet, Mat3, IDENTITY};
 use super::line_search::max_flip_free_step;
 use super::newton::{
-    corner_weights, jacobian, newton, position_energy, NewtonOptions, Objective, Pattern,
+    corner_weights, edge_matrix_of, jacobian, newton, position_energy, NewtonOptions, Objective,
+    Pattern,
 };
 use super::tet::{sub, TetMesh};
 use super::untangle::{untangle_sliding, UntangleOptions};
@@ -219,19 +220,7 @@ struct Rest {
 
 /// Ds of tet `t` at `x` (columns = edges from corner 0).
 fn edge_matrix(x: &[[f64; 3]], t: &[u32; 4]) -> Mat3 {
-    let a = x[t[0] as usize];
-    let e = [
-        sub(x[t[1] as usize], a),
-        sub(x[t[2] as usize], a),
-        sub(x[t[3] as usize], a),
-    ];
-    let mut m = [[0.0; 3]; 3];
-    for r in 0..3 {
-        for c in 0..3 {
-            m[r][c] = e[c][r];
-        }
-    }
-    m
+    edge_matrix_of(t.map(|v| x[v as usize]))
 }
 
 fn rest_data(mesh: &TetMesh) -> Result<Rest, VolError> {

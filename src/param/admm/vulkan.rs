@@ -12,8 +12,8 @@ use super::driver::{Executor, Residuals};
 use super::layout::{FacePush, MuCountPush, ResidualPush};
 use super::{AdmmProblem, AdmmState};
 use crate::gpu::{
-    shaders, Access, Buffer, ComputePipeline, ComputePipelineDesc, Context, DescriptorSet,
-    GpuError, Recorder, TimestampPool,
+    shaders, Access, Buffer, ComputePipeline, Context, DescriptorSet, GpuError, Recorder,
+    TimestampPool,
 };
 use crate::param::energy::Energy;
 
@@ -71,20 +71,6 @@ fn storage<T: bytemuck::Pod>(ctx: &Context, name: &str, data: &[T]) -> Result<Bu
     Buffer::from_slice(ctx, name, data)
 }
 
-fn pipeline(
-    ctx: &Context,
-    name: &str,
-    spv: &[u8],
-    bindings: u32,
-    push: usize,
-) -> Result<ComputePipeline, GpuError> {
-    let words = shaders::words(spv)?;
-    ComputePipeline::new(
-        ctx,
-        &ComputePipelineDesc::new(name, &words, bindings, push as u32),
-    )
-}
-
 impl VulkanExecutor {
     /// Uploads the problem's constant arrays and builds the pipelines. `profile` adds
     /// timestamps around every dispatch.
@@ -120,33 +106,29 @@ impl VulkanExecutor {
         let groups = nf.max(ns).div_ceil(64).max(1);
         let partials = storage(ctx, "admm.residual_partials", &vec![[0f32; 4]; groups])?;
 
-        let face_pipe = pipeline(
+        let face_pipe = ComputePipeline::from_shader::<FacePush>(
             ctx,
             "admm.face_newton",
             shaders::ADMM_FACE_NEWTON,
             6,
-            std::mem::size_of::<FacePush>(),
         )?;
-        let edge_pipe = pipeline(
+        let edge_pipe = ComputePipeline::from_shader::<MuCountPush>(
             ctx,
             "admm.edge_project",
             shaders::ADMM_EDGE_PROJECT,
             5,
-            std::mem::size_of::<MuCountPush>(),
         )?;
-        let dual_pipe = pipeline(
+        let dual_pipe = ComputePipeline::from_shader::<MuCountPush>(
             ctx,
             "admm.dual_update",
             shaders::ADMM_DUAL_UPDATE,
             4,
-            std::mem::size_of::<MuCountPush>(),
         )?;
-        let resid_pipe = pipeline(
+        let resid_pipe = ComputePipeline::from_shader::<ResidualPush>(
             ctx,
             "admm.residual",
             shaders::ADMM_RESIDUAL,
             6,
-            std::mem::size_of::<ResidualPush>(),
         )?;
         let face_set = DescriptorSet::new(
             &face_pipe,

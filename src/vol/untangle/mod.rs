@@ -22,13 +22,13 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::energy::{det3, frob2, inv3, Mat3};
-use super::newton::{corner_weights, jacobian, Corner};
+use super::energy::{det3, frob2, Mat3};
+use super::newton::{corners_of, jacobian, Corner};
 use crate::gpu::Context;
 use vulkan::DeviceTets;
 
 pub mod vulkan;
-use super::tet::{sub, to_unit_sphere, TetMesh};
+use super::tet::{to_unit_sphere, TetMesh};
 use super::VolError;
 
 /// Settings of the untangling stage.
@@ -287,9 +287,9 @@ pub fn untangle(
 /// still sees a descent direction to first order).
 ///
 /// Why: with the boundary pinned to one spherical embedding, tets whose four corners are all
-/// on the boundary keep whatever sign that embedding gave them; on a hand (thin fingers,
-/// tets spanning a finger with only boundary corners) some are inverted by the embedding
-/// itself and no interior placement can repair them. Letting the boundary slide on the
+/// on the boundary keep whatever sign that embedding gave them (a tet spanning a thin part
+/// with only boundary corners is placed by the embedding alone), and where the embedding
+/// inverted one no interior placement can repair it. Letting the boundary slide on the
 /// sphere makes the sphere, not one embedding of it, the constraint.
 ///
 /// `device`: evaluate the per-tet terms there ([`vulkan`]) instead of on the CPU.
@@ -301,7 +301,6 @@ pub fn untangle_sliding(
     opts: &UntangleOptions,
     device: Option<&Context>,
 ) -> Result<UntangleStats, VolError> {
-    let start = Instant::now();
     let nv = x.len();
     if nv != rest.positions.len()
         || fixed.len() != nv
@@ -318,22 +317,13 @@ pub fn untangle_sliding(
     let mut d = Vec::with_capacity(rest.tets.len());
     let mut vol = Vec::with_capacity(rest.tets.len());
     for (i, t) in rest.tets.iter().enumerate() {
-        let a = rest.positions[t[0] as usize];
-        let e: Vec<[f64; 3]> = (1..4)
-            .map(|k| sub(rest.positions[t[k] as usize], a))
-            .collect();
-        let dm = [
-            [e[0][0], e[1][0], e[2][0]],
-            [e[0][1], e[1][1], e[2][1]],
-            [e[0][2], e[1][2], e[2][2]],
-        ];
-        let inv = inv3(&dm).ok_or_else(|| {
+        let (c, det) = corners_of(t.map(|v| rest.positions[v as usize])).ok_or_else(|| {
             VolError::Input(format!("rest tet {i} is degenerate (singular edge matrix)"))
         })?;
-        d.push(corner_weights(&inv));
-        vol.push(det3(&dm).abs());
+        d.push(c);
+        vol.push(det.abs());
     }
-    untangle_cells(&rest.tets, d, vol, x, fixed, on_sphere, opts, start, device)
+    untangle_cells(&rest.tets, d, vol, x, fixed, on_sphere, opts, device)
 }
 
 /// [`untangle_sliding`] on cells given by their corner weights `d` (J = Xᵀ·D) and reference
@@ -348,9 +338,9 @@ pub fn untangle_cells(
     fixed: &[bool],
     on_sphere: &[bool],
     opts: &UntangleOptions,
-    start: Instant,
     device: Option<&Context>,
 ) -> Result<UntangleStats, VolError> {
+    let start = Instant::now();
     let nv = x.len();
     if tets.len() != d.len()
         || tets.len() != vol.len()
@@ -392,8 +382,8 @@ pub fn untangle_cells(
     let total: f64 = vol.iter().sum();
     // The volume term wants det J = 1, but with the boundary fixed the sum of signed volumes
     // of x is fixed too (it is the volume the boundary encloses): measure J against the rest
-    // shape scaled to that volume, so that det J = 1 is attainable on average (e.g. a hand
-    // mapped onto a unit ball).
+    // shape scaled to that volume, so that det J = 1 is attainable on average (a rest mesh of
+    // any size mapped onto the unit ball).
     let enclosed: f64 = tets.iter().map(|t| super::tet::det6(x, t)).sum();
     let scale = if enclosed > 0.0 && enclosed.is_finite() {
         (enclosed / total).cbrt()

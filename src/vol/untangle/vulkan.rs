@@ -13,10 +13,7 @@
 use std::time::Duration;
 
 use super::Corner;
-use crate::gpu::{
-    shaders, Buffer, ComputePipeline, ComputePipelineDesc, Context, DescriptorSet, GpuError,
-    Recorder,
-};
+use crate::gpu::{shaders, Buffer, ComputePipeline, Context, DescriptorSet, GpuError, Recorder};
 
 /// Longest one evaluation may run before it counts as a hung device.
 const TIMEOUT: Duration = Duration::from_secs(120);
@@ -77,15 +74,11 @@ impl DeviceTets {
         let weight = Buffer::from_slice(ctx, "untangle.weights", &weights)?;
         let energy = Buffer::from_slice(ctx, "untangle.energy", &vec![0f32; tets.len()])?;
         let grad = Buffer::from_slice(ctx, "untangle.gradient", &vec![[0f32; 4]; 4 * tets.len()])?;
-        let words = shaders::words(shaders::VOL_UNTANGLE_TET)?;
-        let pipeline = ComputePipeline::new(
+        let pipeline = ComputePipeline::from_shader::<UntanglePush>(
             ctx,
-            &ComputePipelineDesc::new(
-                "untangle.tet",
-                &words,
-                6,
-                std::mem::size_of::<UntanglePush>() as u32,
-            ),
+            "untangle.tet",
+            shaders::VOL_UNTANGLE_TET,
+            6,
         )?;
         let set = DescriptorSet::new(
             &pipeline,
