@@ -25,14 +25,13 @@ use ash::vk;
 use foldfree::embed::{
     self, EmbedOptions, Engine, ForeignBuffer, ForeignCommandBuffer, HostAccess, UvFormat, UvTarget,
 };
-use foldfree::gpu::{Context, HostDesc};
+use foldfree::gpu::{Context, HostDesc, SYNC2_FEATURE, TIMELINE_FEATURE};
 use foldfree::mesh::TriMesh;
 
 pub type BoxResult<T> = Result<T, Box<dyn Error>>;
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 const VALIDATION_FEATURES_EXT: &CStr = c"VK_EXT_validation_features";
-const SYNC2_FEATURE: &str = "VkPhysicalDeviceSynchronization2Features.synchronization2";
 
 /// Bytes per vertex of the host's interleaved vertex buffer: position (3 × f32), UV (2 × f32).
 pub const VERTEX_STRIDE: u64 = 20;
@@ -360,7 +359,7 @@ fn create_device(
     required: &embed::RequiredFeatures,
 ) -> BoxResult<HostDevice> {
     for f in &required.device_features {
-        if *f != SYNC2_FEATURE {
+        if *f != SYNC2_FEATURE && *f != TIMELINE_FEATURE {
             return Err(format!("this host does not know how to enable {f}").into());
         }
     }
@@ -397,10 +396,12 @@ fn create_device(
         .map(|e| e.as_ptr())
         .collect();
     let mut sync2 = vk::PhysicalDeviceSynchronization2Features::default().synchronization2(true);
+    let mut features12 = vk::PhysicalDeviceVulkan12Features::default().timeline_semaphore(true);
     let info = vk::DeviceCreateInfo::default()
         .queue_create_infos(&queue_infos)
         .enabled_extension_names(&ext_names)
-        .push_next(&mut sync2);
+        .push_next(&mut sync2)
+        .push_next(&mut features12);
     // SAFETY: the physical device belongs to the instance; pointers outlive the call.
     let device = unsafe { instance.create_device(pd, &info, None) }?;
     // SAFETY: the device was created with one queue of this family.

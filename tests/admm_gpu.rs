@@ -877,7 +877,7 @@ fn one_executor_iteration_matches_cpu_iteration() {
                     let mu_rel = AdmmOptions::for_energy(energy).initial_mu_rel();
                     let (_, mu) = mu_of(&c, mu_rel);
                     let what = format!("iteration {energy:?} iters {iters} {}", c.label);
-                    let mut exec = VulkanExecutor::new(ctx, &c.problem, energy, iters, false)
+                    let mut exec = VulkanExecutor::new(ctx, &c.problem, energy, iters, false, None)
                         .expect("executor");
                     exec.upload(&c.state).expect("upload");
                     let r_gpu = exec.iterate(1, mu).expect("iterate");
@@ -970,7 +970,8 @@ fn full_solve_agrees(ctx: &Context, energy: Energy) {
     let mut cpu_exec = cpu::CpuExecutor::new(&fx.problem, energy, opts.newton_iters);
     let (rc, tc) = solve_on(fx, &opts, &mut cpu_exec);
     let mut gpu_exec =
-        VulkanExecutor::new(ctx, &fx.problem, energy, opts.newton_iters, false).expect("executor");
+        VulkanExecutor::new(ctx, &fx.problem, energy, opts.newton_iters, false, None)
+            .expect("executor");
     let (rg, tg) = solve_on(fx, &opts, &mut gpu_exec);
     drop(gpu_exec);
     let (ec, fc) = map_energy(&fx.problem, &fx.mesh.faces, &rc.uv, energy);
@@ -1032,7 +1033,7 @@ fn full_solve_symmetric_dirichlet_on_camel_agrees_with_cpu() {
 /// validation message the context collected.
 #[test]
 fn vulkan_admm_hands_off_like_its_cpu_twin() {
-    use foldfree::param::{compute_map, SolverChoice, SolverPath};
+    use foldfree::param::{compute_map, OnDevice, SolverChoice, SolverPath};
     let (mesh, topo, _) = mesh::load(&data("camel_open.obj"), &mesh::ValidateOptions::default())
         .expect("test mesh loads");
     let frames = mesh::frames::compute(&mesh);
@@ -1045,8 +1046,7 @@ fn vulkan_admm_hands_off_like_its_cpu_twin() {
             InitMethod::Lscm,
             SolverChoice::Admm,
             &opts,
-            ctx,
-            false,
+            ctx.map(OnDevice::new).as_ref(),
             &mut |_| {},
         )
         .expect("map");

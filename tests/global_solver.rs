@@ -350,7 +350,6 @@ fn admm_that_stops_short_hands_off_to_the_global_solver() {
             SolverChoice::Admm,
             &opts,
             None,
-            false,
             &mut |_| {},
         )
         .expect("map");

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use bytemuck::{Pod, Zeroable};
 use foldfree::gpu::{
     shaders, Access, Buffer, BufferUsage, ComputePipeline, ComputePipelineDesc, Context,
-    ContextDesc, DescriptorSet, GpuError, MemoryLocation, Recorder, TimestampPool,
+    ContextDesc, DescriptorSet, GpuError, MemoryLocation, Recorder, Timeline, TimestampPool,
 };
 use gpu_common::with_test_context;
 
@@ -238,6 +238,59 @@ fn timestamps_around_a_dispatch_give_a_nonnegative_duration() {
                 (ts[1] - ts[0]) / 1000
             );
         }
+    });
+}
+
+/// A hand-off submitted on another thread signals its timeline value and the recorder's wait
+/// returns; one dropped unsubmitted makes the wait report `Cancelled` and the recorder is
+/// reusable; a recorder that takes its work back (`begin`) makes a late submit fail.
+#[test]
+fn handed_off_work_is_submitted_elsewhere_or_cancelled_cleanly() {
+    with_test_context(|ctx| {
+        let n = 1024usize;
+        let a = Buffer::new(
+            ctx,
+            "test.handoff.a",
+            (n * 4) as u64,
+            BufferUsage::Storage,
+            MemoryLocation::GpuToCpu,
+        )
+        .expect("a");
+        let timeline = Timeline::new(ctx, "test.handoff.timeline").expect("timeline");
+        assert_eq!(timeline.value().expect("value"), 0);
+        let mut rec = Recorder::new(ctx, "test.handoff").expect("recorder");
+
+        rec.begin().expect("begin");
+        rec.fill_buffer(&a, 2.5f32.to_bits());
+        let h = rec.hand_off(&timeline, 1).expect("hand off");
+        assert_eq!(h.value(), 1);
+        let owner = std::thread::spawn(move || h.submit());
+        rec.wait(TIMEOUT)
+            .expect("submitted elsewhere, then complete");
+        owner.join().expect("owner thread").expect("submit");
+        assert_eq!(timeline.value().expect("value"), 1);
+        assert!(timeline.wait(1, TIMEOUT).expect("wait"));
+        let out: Vec<f32> = a.read().expect("read");
+        assert!(out.iter().all(|&v| v == 2.5));
+        assert!(rec.last_latency().is_some());
+
+        rec.begin().expect("begin");
+        rec.fill_buffer(&a, 0);
+        let h = rec.hand_off(&timeline, 2).expect("hand off");
+        drop(h);
+        assert!(matches!(rec.wait(TIMEOUT), Err(GpuError::Cancelled { .. })));
+        assert_eq!(timeline.value().expect("value"), 1, "nothing ran");
+
+        rec.begin().expect("begin");
+        rec.fill_buffer(&a, 0);
+        let h = rec.hand_off(&timeline, 2).expect("hand off");
+        rec.begin().expect("takes the unsubmitted work back");
+        assert!(matches!(h.submit(), Err(GpuError::Invalid(_))));
+        rec.fill_buffer(&a, 1.0f32.to_bits());
+        rec.submit_and_wait(TIMEOUT)
+            .expect("the recorder still works");
+        let out: Vec<f32> = a.read().expect("read");
+        assert!(out.iter().all(|&v| v == 1.0));
     });
 }
 

@@ -18,6 +18,7 @@ use super::conv;
 use super::error::{map_result, GpuError, GpuResult};
 use super::pipeline::{ComputePipeline, DescriptorSet};
 use super::query::TimestampPool;
+use super::timeline::{hand_off, Handoff, Outcome, Ticket, Timeline};
 
 /// One side of a barrier: what a command did to memory before it, or will do after it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,6 +47,8 @@ enum State {
     Recording,
     /// Submitted; the fence has not been seen signalled yet (after a timeout).
     Pending,
+    /// Ended and handed off ([`Recorder::hand_off`]); `ticket` says what became of it.
+    Handed,
 }
 
 /// Records compute work and submits it, blocking until it is done.
@@ -62,10 +65,20 @@ pub struct Recorder {
     /// The first recording error, returned by `submit_and_wait`.
     error: Option<GpuError>,
     dispatches: u32,
+    /// In state `Handed`: the recorder's side of the hand-off.
+    ticket: Option<Ticket>,
+    /// Wall time from submission to observed completion of the last handed-off work.
+    last_latency: Option<Duration>,
 }
 
 impl Drop for Recorder {
     fn drop(&mut self) {
+        if let Some(ticket) = self.ticket.take() {
+            if !ticket.revoke() {
+                // On the queue: the command buffer must not be freed before it completes.
+                ticket.wait_forever();
+            }
+        }
         if self.state == State::Pending {
             // SAFETY: the fence is ours; waiting forever is the only way to know the command
             // buffer is no longer in use (on device loss the wait returns at once).
@@ -107,6 +120,8 @@ impl Recorder {
             keep_alive: Vec::new(),
             error: None,
             dispatches: 0,
+            ticket: None,
+            last_latency: None,
         };
         let pool_info = vk::CommandPoolCreateInfo::default()
             .flags(vk::CommandPoolCreateFlags::TRANSIENT)
@@ -144,8 +159,18 @@ impl Recorder {
 
     /// Starts a new recording (waiting first for a submission that timed out).
     pub fn begin(&mut self) -> GpuResult<()> {
-        if self.state == State::Pending {
-            self.wait(Duration::MAX)?;
+        if let Some(ticket) = &self.ticket {
+            // Work handed off but never submitted is taken back; submitted work is waited for.
+            if ticket.revoke() {
+                self.ticket = None;
+                self.state = State::Idle;
+            }
+        }
+        if matches!(self.state, State::Pending | State::Handed) {
+            match self.wait(Duration::MAX) {
+                Ok(()) | Err(GpuError::Cancelled { .. }) => {}
+                Err(e) => return Err(e),
+            }
         }
         let device = self.ctx.device();
         // SAFETY: the command buffer is not pending (state is Idle or Recording), so resetting
@@ -414,15 +439,12 @@ impl Recorder {
         self.keep(pool);
     }
 
-    /// Ends the recording, submits it and waits up to `timeout`.
-    ///
-    /// The recording ends with a barrier from all device writes to host reads, so mapped
-    /// buffers can be read right after this returns. On [`GpuError::Timeout`] the work stays
-    /// in flight: call [`Recorder::wait`] again, or drop the recorder (which waits).
-    pub fn submit_and_wait(&mut self, timeout: Duration) -> GpuResult<()> {
+    /// Ends the recording with a barrier from all device writes to host reads (so mapped
+    /// buffers can be read once the work is done), returning the command buffer.
+    fn end(&mut self, what: &str) -> GpuResult<vk::CommandBuffer> {
         if self.state != State::Recording {
             return Err(self.error.take().unwrap_or_else(|| {
-                GpuError::Invalid(format!("submit_and_wait without begin() on {}", self.name))
+                GpuError::Invalid(format!("{what} without begin() on {}", self.name))
             }));
         }
         let cmd = self.raw;
@@ -443,6 +465,16 @@ impl Recorder {
             self.keep_alive.clear();
             return Err(e);
         }
+        Ok(cmd)
+    }
+
+    /// Ends the recording, submits it and waits up to `timeout`.
+    ///
+    /// The recording ends with a barrier from all device writes to host reads, so mapped
+    /// buffers can be read right after this returns. On [`GpuError::Timeout`] the work stays
+    /// in flight: call [`Recorder::wait`] again, or drop the recorder (which waits).
+    pub fn submit_and_wait(&mut self, timeout: Duration) -> GpuResult<()> {
+        let cmd = self.end("submit_and_wait")?;
         let buffers = [cmd];
         let submit = vk::SubmitInfo::default().command_buffers(&buffers);
         if let Err(e) = self.ctx.submit(&submit, self.fence) {
@@ -453,8 +485,53 @@ impl Recorder {
         self.wait(timeout)
     }
 
+    /// Ends the recording and hands it to whoever owns the queue: the returned [`Handoff`]
+    /// signals `value` on `timeline` once submitted and complete. [`Recorder::wait`] blocks
+    /// until then, or returns [`GpuError::Cancelled`] if the hand-off is dropped unsubmitted;
+    /// [`Recorder::begin`] and dropping the recorder take unsubmitted work back.
+    pub fn hand_off(&mut self, timeline: &Timeline, value: u64) -> GpuResult<Handoff> {
+        if timeline.context().device().handle() != self.ctx.device().handle() {
+            return Err(GpuError::Invalid(format!(
+                "{}: timeline {} belongs to another device",
+                self.name,
+                timeline.name()
+            )));
+        }
+        let cmd = self.end("hand_off")?;
+        let (handoff, ticket) = hand_off(cmd, timeline, value);
+        self.keep(timeline);
+        self.ticket = Some(ticket);
+        self.state = State::Handed;
+        Ok(handoff)
+    }
+
+    /// Wall time from the submission of the last handed-off work to its observed completion:
+    /// an upper bound of its device time.
+    pub fn last_latency(&self) -> Option<Duration> {
+        self.last_latency
+    }
+
     /// Waits up to `timeout` for the last submission (no-op when none is in flight).
     pub fn wait(&mut self, timeout: Duration) -> GpuResult<()> {
+        if self.state == State::Handed {
+            let outcome = match &self.ticket {
+                Some(ticket) => ticket.wait(timeout, &self.name)?,
+                None => Outcome::NeverRan,
+            };
+            self.ticket = None;
+            self.state = State::Idle;
+            self.keep_alive.clear();
+            self.bound = None;
+            return match outcome {
+                Outcome::Done { since_submit } => {
+                    self.last_latency = Some(since_submit);
+                    Ok(())
+                }
+                Outcome::NeverRan => Err(GpuError::Cancelled {
+                    what: self.name.clone(),
+                }),
+            };
+        }
         if self.state != State::Pending {
             return Ok(());
         }

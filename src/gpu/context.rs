@@ -25,7 +25,8 @@ const VALIDATION_FEATURES_EXT: &CStr = c"VK_EXT_validation_features";
 /// Device extension a portability driver (MoltenVK) requires us to enable when it offers it.
 const PORTABILITY_SUBSET_EXT: &CStr = c"VK_KHR_portability_subset";
 
-/// The Vulkan version we program against: 1.2 core plus `VK_KHR_synchronization2`.
+/// The Vulkan version we program against: 1.2 core (with its timeline semaphores) plus
+/// `VK_KHR_synchronization2`.
 pub const API_VERSION: u32 = vk::API_VERSION_1_2;
 
 /// Environment variable selecting the device (a substring of its name, or its index); it
@@ -79,9 +80,15 @@ pub fn required_features() -> RequiredFeatures {
     RequiredFeatures {
         api_version: API_VERSION,
         device_extensions: vec![ash::khr::synchronization2::NAME],
-        device_features: vec!["VkPhysicalDeviceSynchronization2Features.synchronization2"],
+        device_features: vec![SYNC2_FEATURE, TIMELINE_FEATURE],
     }
 }
+
+/// The `VK_KHR_synchronization2` feature, as [`RequiredFeatures::device_features`] names it.
+pub const SYNC2_FEATURE: &str = "VkPhysicalDeviceSynchronization2Features.synchronization2";
+/// Vulkan 1.2's timeline semaphores (every 1.2 device supports them; they must be enabled):
+/// what an asynchronous job signals (`embed::Job`).
+pub const TIMELINE_FEATURE: &str = "VkPhysicalDeviceVulkan12Features.timelineSemaphore";
 
 /// The device limits this crate plans with.
 #[derive(Clone, Copy, Debug)]
@@ -809,7 +816,10 @@ fn candidates(instance: &ash::Instance) -> GpuResult<Vec<Candidate>> {
         let extensions = unsafe { instance.enumerate_device_extension_properties(raw) }
             .map_err(|r| map_result("vkEnumerateDeviceExtensionProperties", r))?;
         let mut sync2_features = vk::PhysicalDeviceSynchronization2Features::default();
-        let mut features2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut sync2_features);
+        let mut features12 = vk::PhysicalDeviceVulkan12Features::default();
+        let mut features2 = vk::PhysicalDeviceFeatures2::default()
+            .push_next(&mut sync2_features)
+            .push_next(&mut features12);
         // SAFETY: `features2` and its chained struct live across the call. The instance is
         // Vulkan 1.2, so the core entry point exists.
         unsafe { instance.get_physical_device_features2(raw, &mut features2) };
@@ -835,6 +845,8 @@ fn candidates(instance: &ash::Instance) -> GpuResult<Vec<Candidate>> {
             || sync2_features.synchronization2 == vk::FALSE
         {
             Some("no VK_KHR_synchronization2".to_string())
+        } else if features12.timeline_semaphore == vk::FALSE {
+            Some("no timeline semaphores".to_string())
         } else {
             None
         };
@@ -925,10 +937,12 @@ fn create_device(
         ext_names.push(PORTABILITY_SUBSET_EXT.as_ptr());
     }
     let mut sync2 = vk::PhysicalDeviceSynchronization2Features::default().synchronization2(true);
+    let mut features12 = vk::PhysicalDeviceVulkan12Features::default().timeline_semaphore(true);
     let info = vk::DeviceCreateInfo::default()
         .queue_create_infos(&queue_infos)
         .enabled_extension_names(&ext_names)
-        .push_next(&mut sync2);
+        .push_next(&mut sync2)
+        .push_next(&mut features12);
     // SAFETY: the physical device belongs to `instance`; every pointer in `info` lives until
     // the call returns; the extension and feature were checked as supported.
     let device = unsafe { instance.create_device(candidate.raw, &info, None) }

@@ -61,6 +61,9 @@ pub enum GpuError {
         #[source]
         source: gpu_allocator::AllocationError,
     },
+    /// Work handed to the queue's owner was dropped unsubmitted (a cancelled job).
+    #[error("GPU work {what} was cancelled before it was submitted")]
+    Cancelled { what: String },
     /// The device lacks something a feature of this layer needs (e.g. timestamps).
     #[error("{0}")]
     Unsupported(String),

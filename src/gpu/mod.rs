@@ -12,6 +12,8 @@
 //!   submits and waits.
 //! - [`render_checker`]: an offscreen graphics render of a UV-mapped mesh with a checkerboard.
 //! - [`TimestampPool`]: GPU timestamps for per-kernel timings.
+//! - [`Timeline`] + [`Handoff`]: timeline semaphores, and recordings submitted by the queue's
+//!   owner on another thread (asynchronous jobs).
 //! - [`shaders`]: the SPIR-V compiled from `glsl/` by `build.rs`.
 
 // The unsafe discipline, checked by clippy: one unsafe operation per block, each with a
@@ -31,19 +33,22 @@ mod pipeline;
 mod query;
 mod render;
 pub mod shaders;
+mod timeline;
 
 pub use backend::{open_backend, BackendChoice};
 pub use buffer::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
 pub use command::{grid_1d, Access, Recorder};
 pub use context::{
     required_features, Context, ContextDesc, DeviceLimits, HostAllocator, HostDesc,
-    RequiredFeatures, API_VERSION, DEVICE_ENV, SYNC_VALIDATION_ENV,
+    RequiredFeatures, API_VERSION, DEVICE_ENV, SYNC2_FEATURE, SYNC_VALIDATION_ENV,
+    TIMELINE_FEATURE,
 };
 pub use debug::MessageLog;
 pub use error::{map_result, GpuError, GpuResult, INSTALL_HINT};
 pub use pipeline::{ComputePipeline, ComputePipelineDesc, DescriptorSet, DEFAULT_WORKGROUP_SIZE};
 pub use query::TimestampPool;
 pub use render::{render_checker, RenderDesc, Shade, BACKGROUND};
+pub use timeline::{Handoff, Timeline};
 
 /// Raw Vulkan types, for hosts that bring their own device ([`Context::from_host`]).
 pub use ash::vk;

@@ -10,7 +10,7 @@ use crate::init::{initial_map, InitMethod};
 use crate::mesh::{self, Topology, TriMesh};
 use crate::metrics;
 use crate::param::job::{ParamJob, ParamOutput};
-use crate::param::map::{compute_map, MapOutput, Progress, SolverChoice, SolverPath};
+use crate::param::map::{compute_map, MapOutput, OnDevice, Progress, SolverChoice, SolverPath};
 use crate::param::AdmmOptions;
 use crate::report::ParamReport;
 use crate::Result;
@@ -50,6 +50,10 @@ pub(crate) fn run_atlas(
     let mut splits: Vec<cut::Split> = Vec::new();
     let mut failed: Vec<cut::Split> = Vec::new();
     let mut cache: std::collections::HashMap<Vec<u32>, MapOutput> = Default::default();
+    let device = ctx.map(|ctx| OnDevice {
+        profile: job.profile,
+        ..OnDevice::new(ctx)
+    });
     let maps = loop {
         let mut maps = Vec::with_capacity(cutm.charts.len());
         let mut new_splits = Vec::new();
@@ -64,8 +68,7 @@ pub(crate) fn run_atlas(
                     job.init,
                     solver,
                     admm,
-                    ctx,
-                    job.profile,
+                    device.as_ref(),
                     progress,
                 )?,
             };

@@ -12,7 +12,7 @@ use crate::mesh::{self, Scale, TriMesh};
 use crate::metrics;
 use crate::param::admm::AdmmOptions;
 use crate::param::atlas::run_atlas;
-use crate::param::map::{compute_map, Progress, SolverChoice};
+use crate::param::map::{compute_map, OnDevice, Progress, SolverChoice};
 use crate::param::Energy;
 use crate::report::ParamReport;
 use crate::{Error, Result};
@@ -216,14 +216,17 @@ fn solve(
             progress,
         );
     }
+    let device = ctx.as_ref().map(|ctx| OnDevice {
+        profile: job.profile,
+        ..OnDevice::new(ctx)
+    });
     let map = compute_map(
         &mesh,
         topo,
         job.init,
         solver,
         &admm,
-        ctx.as_ref(),
-        job.profile,
+        device.as_ref(),
         progress,
     )?;
     let m = metrics::evaluate(&mesh.positions, &mesh.faces, &map.uv, &topo.boundary_loops);

@@ -42,6 +42,27 @@ impl SolverChoice {
     }
 }
 
+/// ADMM on a Vulkan device: the context, whether to time every kernel (`--profile`), and
+/// how submissions reach the queue (`None`: one waited-for submission per batch; see
+/// [`admm::vulkan::Slicing`] for an asynchronous job's slices).
+#[derive(Clone, Debug)]
+pub struct OnDevice<'a> {
+    pub ctx: &'a crate::gpu::Context,
+    pub profile: bool,
+    pub slicing: Option<admm::vulkan::Slicing>,
+}
+
+impl<'a> OnDevice<'a> {
+    /// Plain batches, no profiling.
+    pub fn new(ctx: &'a crate::gpu::Context) -> OnDevice<'a> {
+        OnDevice {
+            ctx,
+            profile: false,
+            slicing: None,
+        }
+    }
+}
+
 /// What a running solve reports: every residual check of ADMM, every iteration of the global
 /// solver (so a host can show progress whichever runs; Ctrl-C reaches both through
 /// [`AdmmOptions::stop`]).
@@ -177,8 +198,7 @@ pub fn compute_map(
     init: InitMethod,
     solver: SolverChoice,
     opts: &AdmmOptions,
-    ctx: Option<&crate::gpu::Context>,
-    profile: bool,
+    device: Option<&OnDevice<'_>>,
     progress: &mut dyn FnMut(Progress<'_>),
 ) -> Result<MapOutput> {
     let t1 = Instant::now();
@@ -246,8 +266,7 @@ pub fn compute_map(
                 &uv,
                 fallback.as_deref(),
                 opts,
-                ctx,
-                profile,
+                device,
                 progress,
                 &mut out,
             )?;
@@ -304,8 +323,7 @@ fn run_admm(
     uv: &[[f64; 2]],
     fallback: Option<&[[f64; 2]]>,
     opts: &AdmmOptions,
-    ctx: Option<&crate::gpu::Context>,
-    profile: bool,
+    device: Option<&OnDevice<'_>>,
     progress: &mut dyn FnMut(Progress<'_>),
     out: &mut MapOutput,
 ) -> Result<admm::AdmmResult> {
@@ -314,17 +332,19 @@ fn run_admm(
             progress(Progress::Admm(h))
         })
     };
-    match ctx {
+    match device {
         Some(_) if opts.accel != admm::Accel::None => Err(crate::Error::Usage(
             "--accel anderson runs on the CPU backend only (use --backend cpu)".into(),
         )),
-        Some(ctx) => {
+        Some(device) => {
+            let ctx = device.ctx;
             let mut exec = admm::vulkan::VulkanExecutor::new(
                 ctx,
                 problem,
                 opts.energy,
                 opts.newton_iters,
-                profile,
+                device.profile,
+                device.slicing.clone(),
             )?;
             let r = solve(&mut exec)?;
             out.kernel_times = exec.kernel_times().cloned();

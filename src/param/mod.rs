@@ -16,4 +16,4 @@ pub mod recover;
 pub use admm::AdmmOptions;
 pub use energy::Energy;
 pub use job::{run_param, BackendChoice, CutMode, ParamJob, ParamOutput};
-pub use map::{compute_map, MapOutput, Progress, SolverChoice, SolverPath};
+pub use map::{compute_map, MapOutput, OnDevice, Progress, SolverChoice, SolverPath};

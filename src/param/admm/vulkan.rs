@@ -5,15 +5,25 @@
 //! Per iteration: face_newton → edge_project → dual_update, with a compute→compute barrier
 //! between dependent dispatches (each kernel reads what the previous wrote, and overwrites what
 //! the next iteration's earlier kernels read, so every boundary is both RAW and WAR).
+//!
+//! **Slices.** By default a batch is one submission waited for with a fence. Run as an
+//! asynchronous job ([`Slicing`]), a batch is cut into slices of about `budget` device time
+//! (iterations per slice from the last slice's timestamps), each signalling the next value of
+//! the job's timeline semaphore and either submitted here or handed to the thread that owns
+//! the queue; uploads and downloads that need a staging copy travel in slices too, so the
+//! executor never touches the queue itself when it does not own it. Cutting a batch changes no
+//! arithmetic: the same kernels run in the same order, so the iterates are bit-identical.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use super::driver::{Executor, Residuals};
 use super::layout::{FacePush, MuCountPush, ResidualPush};
 use super::{AdmmProblem, AdmmState};
 use crate::gpu::{
-    shaders, Access, Buffer, ComputePipeline, Context, DescriptorSet, GpuError, Recorder,
-    TimestampPool,
+    shaders, Access, Buffer, BufferDesc, BufferUsage, ComputePipeline, Context, DescriptorSet,
+    GpuError, Handoff, MemoryLocation, Recorder, Timeline, TimestampPool,
 };
 use crate::param::energy::Energy;
 
@@ -28,6 +38,36 @@ pub struct KernelTimes {
     pub dual_update_ns: u64,
     pub residual_ns: u64,
     pub iterations: u64,
+}
+
+/// How the executor's work reaches the queue when it runs as an asynchronous job.
+#[derive(Clone, Debug)]
+pub struct Slicing {
+    /// Slice `k` of the job signals value `k` (counting from the value the timeline had).
+    pub timeline: Timeline,
+    /// Device time one slice should take: iterations per slice are sized from the measured
+    /// time of the previous slice (the first has one iteration).
+    pub budget: Duration,
+    /// `None`: the executor submits each slice itself (the queue is the job's alone). `Some`:
+    /// each slice goes to the queue's owner, who submits it (e.g. between two frames); a
+    /// dropped hand-off cancels the run ([`GpuError::Cancelled`]).
+    pub handoff: Option<mpsc::Sender<Handoff>>,
+    /// Counters the job's owner reads without locking.
+    pub stats: Arc<SliceStats>,
+}
+
+/// What the slices of a job did so far.
+#[derive(Debug, Default)]
+pub struct SliceStats {
+    pub slices: AtomicU64,
+    pub iterations: AtomicU64,
+    /// Measured device time of all slices (timestamps; the submission-to-completion wall time
+    /// where the queue has none).
+    pub device_ns: AtomicU64,
+    /// The longest slice.
+    pub longest_ns: AtomicU64,
+    /// The timeline value of the last slice submitted to the queue.
+    pub last_value: AtomicU64,
 }
 
 /// Four pipelines with their bound buffers.
@@ -52,6 +92,17 @@ pub struct VulkanExecutor {
     kernels: Kernels,
     recorder: Recorder,
     profile: Option<(TimestampPool, KernelTimes)>,
+    slices: Option<Slices>,
+}
+
+/// The executor's side of a [`Slicing`].
+struct Slices {
+    plan: Slicing,
+    /// Start and end of the current slice (`None` when the queue has no timestamps).
+    stamps: Option<TimestampPool>,
+    next_value: u64,
+    /// Measured device time per iteration, once a slice has run.
+    ns_per_iteration: Option<f64>,
 }
 
 fn to_f32x4(v: &[[f64; 4]]) -> Vec<[f32; 4]> {
@@ -62,13 +113,12 @@ fn to_f64x4(v: &[[f32; 4]]) -> Vec<[f64; 4]> {
     v.iter().map(|m| m.map(f64::from)).collect()
 }
 
-/// A storage buffer holding `data`, at least 16 bytes (Vulkan buffers cannot be empty; a mesh
-/// with no interior edge has no slots).
-fn storage<T: bytemuck::Pod>(ctx: &Context, name: &str, data: &[T]) -> Result<Buffer, GpuError> {
-    if data.is_empty() {
-        return Buffer::from_slice(ctx, name, &[0u32; 4]);
-    }
-    Buffer::from_slice(ctx, name, data)
+/// A device-local storage buffer for `n` values of `T`, at least 16 bytes (Vulkan buffers
+/// cannot be empty; a mesh with no interior edge has no slots). Filled by
+/// [`VulkanExecutor::put`].
+fn storage<T>(ctx: &Context, name: &str, n: usize) -> Result<Buffer, GpuError> {
+    let bytes = (n * std::mem::size_of::<T>()).max(16) as u64;
+    Buffer::with_desc(ctx, &BufferDesc::storage(name, bytes))
 }
 
 impl VulkanExecutor {
@@ -80,31 +130,40 @@ impl VulkanExecutor {
         energy: Energy,
         newton_iters: u32,
         profile: bool,
+        slicing: Option<Slicing>,
     ) -> Result<VulkanExecutor, GpuError> {
         let nf = problem.n_faces();
         let ns = problem.n_slots();
-        let zeros4 = vec![[0f32; 4]; nf];
-        let a = storage(ctx, "admm.face_jacobians", &zeros4)?;
-        let a_prev = storage(ctx, "admm.face_jacobians_prev", &zeros4)?;
-        let y = storage(ctx, "admm.slot_copies", &vec![[0f32; 4]; ns])?;
-        let lambda = storage(ctx, "admm.slot_multipliers", &vec![[0f32; 4]; ns])?;
+        let a = storage::<[f32; 4]>(ctx, "admm.face_jacobians", nf)?;
+        let a_prev = storage::<[f32; 4]>(ctx, "admm.face_jacobians_prev", nf)?;
+        let y = storage::<[f32; 4]>(ctx, "admm.slot_copies", ns)?;
+        let lambda = storage::<[f32; 4]>(ctx, "admm.slot_multipliers", ns)?;
         let slots: Vec<[u32; 4]> = problem
             .face_slots
             .iter()
             .map(|s| [s[0], s[1], s[2], u32::MAX])
             .collect();
-        let face_slots = storage(ctx, "admm.face_slots", &slots)?;
+        let face_slots = storage::<[u32; 4]>(ctx, "admm.face_slots", nf)?;
         let weights: Vec<f32> = problem.weight.iter().map(|&w| w as f32).collect();
-        let weight = storage(ctx, "admm.face_weights", &weights)?;
-        let slot_face = storage(ctx, "admm.slot_face", &problem.slot_face)?;
+        let weight = storage::<f32>(ctx, "admm.face_weights", nf)?;
+        let slot_face = storage::<u32>(ctx, "admm.slot_face", ns)?;
         let dirs: Vec<[f32; 2]> = problem
             .slot_dir
             .iter()
             .map(|d| [d[0] as f32, d[1] as f32])
             .collect();
-        let slot_dir = storage(ctx, "admm.slot_dirs", &dirs)?;
+        let slot_dir = storage::<[f32; 2]>(ctx, "admm.slot_dirs", ns)?;
         let groups = nf.max(ns).div_ceil(64).max(1);
-        let partials = storage(ctx, "admm.residual_partials", &vec![[0f32; 4]; groups])?;
+        // Read back at every check: host-visible, so the read is never a queue operation.
+        let partials = Buffer::with_desc(
+            ctx,
+            &BufferDesc {
+                name: "admm.residual_partials",
+                size: (groups * 16) as u64,
+                usage: BufferUsage::Storage,
+                location: MemoryLocation::GpuToCpu,
+            },
+        )?;
 
         let face_pipe = ComputePipeline::from_shader::<FacePush>(
             ctx,
@@ -159,13 +218,26 @@ impl VulkanExecutor {
         } else {
             None
         };
-        Ok(VulkanExecutor {
+        let slices = match slicing {
+            None => None,
+            Some(plan) => Some(Slices {
+                stamps: if ctx.limits().timestamps {
+                    Some(TimestampPool::new(ctx, "admm.slice_timestamps", 2)?)
+                } else {
+                    None
+                },
+                next_value: plan.timeline.value()? + 1,
+                ns_per_iteration: None,
+                plan,
+            }),
+        };
+        let mut exec = VulkanExecutor {
             ctx: ctx.clone(),
             energy,
             newton_iters,
             n_faces: nf as u32,
             n_slots: ns as u32,
-            a,
+            a: a.clone(),
             y,
             lambda,
             partials,
@@ -177,7 +249,141 @@ impl VulkanExecutor {
             },
             recorder,
             profile,
-        })
+            slices,
+        };
+        let zeros = vec![[0f32; 4]; nf];
+        exec.put(&a_prev, &zeros)?;
+        exec.put(&face_slots, &slots)?;
+        exec.put(&weight, &weights)?;
+        exec.put(&slot_face, &problem.slot_face)?;
+        exec.put(&slot_dir, &dirs)?;
+        Ok(exec)
+    }
+
+    /// Starts a submission (a slice when sliced: timestamp 0 first).
+    fn open(&mut self) -> Result<(), GpuError> {
+        self.recorder.begin()?;
+        if let Some(pool) = self.slices.as_ref().and_then(|s| s.stamps.as_ref()) {
+            self.recorder.write_timestamp(pool, 0);
+        }
+        Ok(())
+    }
+
+    /// Ends the submission, sends it on its way and waits for it; returns the slice's measured
+    /// device time when sliced.
+    fn close(&mut self) -> Result<Option<u64>, GpuError> {
+        let Some(sl) = &mut self.slices else {
+            self.recorder.submit_and_wait(BATCH_TIMEOUT)?;
+            return Ok(None);
+        };
+        if let Some(pool) = &sl.stamps {
+            self.recorder.write_timestamp(pool, 1);
+        }
+        let value = sl.next_value;
+        sl.next_value += 1;
+        let handoff = self.recorder.hand_off(&sl.plan.timeline, value)?;
+        match &sl.plan.handoff {
+            None => {
+                handoff.submit()?;
+                sl.plan.stats.last_value.store(value, Ordering::Release);
+            }
+            // The owner records the value when it submits.
+            Some(tx) => {
+                if let Err(mpsc::SendError(h)) = tx.send(handoff) {
+                    // The owner is gone: the hand-off is abandoned and the wait says so.
+                    drop(h);
+                }
+            }
+        }
+        self.recorder.wait(BATCH_TIMEOUT)?;
+        let ns = match &sl.stamps {
+            Some(pool) => {
+                let t = pool.read_ns()?;
+                t[1].saturating_sub(t[0])
+            }
+            None => self
+                .recorder
+                .last_latency()
+                .map_or(0, |d| d.as_nanos() as u64),
+        };
+        let stats = &sl.plan.stats;
+        stats.slices.fetch_add(1, Ordering::Relaxed);
+        stats.device_ns.fetch_add(ns, Ordering::Relaxed);
+        stats.longest_ns.fetch_max(ns, Ordering::Relaxed);
+        Ok(Some(ns))
+    }
+
+    /// Writes `data` at the start of `buf`: through the mapping when it is host visible (no
+    /// queue work), else through a staging buffer and a copy in a submission of our own.
+    fn put<T: bytemuck::Pod>(&mut self, buf: &Buffer, data: &[T]) -> Result<(), GpuError> {
+        if data.is_empty() {
+            return Ok(());
+        }
+        if buf.is_host_visible() {
+            return buf.write(data);
+        }
+        let bytes = std::mem::size_of_val(data) as u64;
+        let staging = Buffer::new(
+            &self.ctx,
+            &format!("{}.staging_upload", buf.name()),
+            bytes,
+            BufferUsage::Staging,
+            MemoryLocation::CpuToGpu,
+        )?;
+        staging.write(data)?;
+        self.open()?;
+        self.recorder
+            .barrier(Access::ComputeReadWrite, Access::TransferWrite);
+        self.recorder.copy_buffer(&staging, buf, bytes);
+        self.recorder
+            .barrier(Access::TransferWrite, Access::ComputeReadWrite);
+        self.close()?;
+        Ok(())
+    }
+
+    /// The first `n` values of `buf` (see [`VulkanExecutor::put`]).
+    fn get<T: bytemuck::Pod>(&mut self, buf: &Buffer, n: usize) -> Result<Vec<T>, GpuError> {
+        if n == 0 {
+            return Ok(Vec::new());
+        }
+        if buf.is_host_visible() {
+            let mut all: Vec<T> = buf.read()?;
+            all.truncate(n);
+            return Ok(all);
+        }
+        let bytes = (n * std::mem::size_of::<T>()) as u64;
+        let staging = Buffer::new(
+            &self.ctx,
+            &format!("{}.staging_download", buf.name()),
+            bytes,
+            BufferUsage::Staging,
+            MemoryLocation::GpuToCpu,
+        )?;
+        self.open()?;
+        self.recorder
+            .barrier(Access::ComputeReadWrite, Access::TransferRead);
+        self.recorder.copy_buffer(buf, &staging, bytes);
+        self.close()?;
+        let mut all: Vec<T> = staging.read()?;
+        all.truncate(n);
+        Ok(all)
+    }
+
+    /// Iterations of the next slice out of `remaining`: all of them unless sliced; when
+    /// sliced, as many as fit the budget at the measured rate (one until measured).
+    fn slice_len(&self, remaining: usize) -> usize {
+        match &self.slices {
+            None => remaining,
+            Some(sl) if sl.plan.budget == Duration::MAX => remaining,
+            Some(sl) => match sl.ns_per_iteration {
+                None => 1,
+                Some(t) => {
+                    let fit = sl.plan.budget.as_nanos() as f64 / t.max(1.0);
+                    (fit.floor() as usize).clamp(1, remaining)
+                }
+            },
+        }
+        .min(remaining)
     }
 
     /// Device time per kernel accumulated over the profiled iterations.
@@ -267,24 +473,24 @@ impl Executor for VulkanExecutor {
     }
 
     fn upload(&mut self, state: &AdmmState) -> crate::Result<()> {
-        self.a.write(&to_f32x4(&state.a))?;
-        if !state.y.is_empty() {
-            self.y.write(&to_f32x4(&state.y))?;
-            self.lambda.write(&to_f32x4(&state.lambda))?;
-        }
+        let (a, y, lambda) = (self.a.clone(), self.y.clone(), self.lambda.clone());
+        self.put(&a, &to_f32x4(&state.a))?;
+        self.put(&y, &to_f32x4(&state.y))?;
+        self.put(&lambda, &to_f32x4(&state.lambda))?;
         Ok(())
     }
 
     fn download(&mut self) -> crate::Result<AdmmState> {
         let nf = self.n_faces as usize;
         let ns = self.n_slots as usize;
-        let a: Vec<[f32; 4]> = self.a.read()?;
-        let y: Vec<[f32; 4]> = self.y.read()?;
-        let l: Vec<[f32; 4]> = self.lambda.read()?;
+        let (a, y, lambda) = (self.a.clone(), self.y.clone(), self.lambda.clone());
+        let a: Vec<[f32; 4]> = self.get(&a, nf)?;
+        let y: Vec<[f32; 4]> = self.get(&y, ns)?;
+        let l: Vec<[f32; 4]> = self.get(&lambda, ns)?;
         Ok(AdmmState {
-            a: to_f64x4(&a[..nf]),
-            y: to_f64x4(&y[..ns]),
-            lambda: to_f64x4(&l[..ns]),
+            a: to_f64x4(&a),
+            y: to_f64x4(&y),
+            lambda: to_f64x4(&l),
         })
     }
 
@@ -294,14 +500,15 @@ impl Executor for VulkanExecutor {
         // Profiled batches are submitted one iteration at a time so that the five timestamps
         // bracket each kernel of every iteration.
         let profiled = self.profile.as_ref().map(|(pool, _)| pool.clone());
-        let chunks: Vec<usize> = if profiled.is_some() {
-            vec![1; n]
-        } else {
-            vec![n]
-        };
-        for (c, &len) in chunks.iter().enumerate() {
-            let last_chunk = c + 1 == chunks.len();
-            self.recorder.begin()?;
+        let mut done = 0;
+        while done < n {
+            let len = if profiled.is_some() {
+                1
+            } else {
+                self.slice_len(n - done)
+            };
+            let last_chunk = done + len == n;
+            self.open()?;
             for k in 0..len {
                 let save_prev = last_chunk && k + 1 == len;
                 self.record_iteration(mu, save_prev, profiled.as_ref());
@@ -312,7 +519,14 @@ impl Executor for VulkanExecutor {
             if let Some(pool) = &profiled {
                 self.recorder.write_timestamp(pool, 4);
             }
-            self.recorder.submit_and_wait(BATCH_TIMEOUT)?;
+            let slice_ns = self.close()?;
+            if let (Some(sl), Some(ns)) = (&mut self.slices, slice_ns) {
+                sl.ns_per_iteration = Some(ns as f64 / len as f64);
+                sl.plan
+                    .stats
+                    .iterations
+                    .fetch_add(len as u64, Ordering::Relaxed);
+            }
             if let Some((pool, times)) = &mut self.profile {
                 let t = pool.read_ns()?;
                 times.face_newton_ns += t[1].saturating_sub(t[0]);
@@ -323,6 +537,7 @@ impl Executor for VulkanExecutor {
                 }
                 times.iterations += 1;
             }
+            done += len;
         }
         let partials: Vec<[f32; 4]> = self.partials.read()?;
         let mut r = Residuals::default();

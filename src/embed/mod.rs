@@ -70,14 +70,15 @@
 //!   two threads at once is the host's error (Vulkan requires external synchronization).
 #![forbid(unsafe_code)]
 
-use std::path::Path;
+mod job;
+
+pub use job::{Job, JobOptions, JobPhase, JobProgress, JobQueue};
 
 use crate::gpu::interop::{ForeignDispatch, ForeignRange, ForeignSet, SetEntry, TargetUse};
 use crate::gpu::{shaders, vk, Buffer, ComputePipeline, ComputePipelineDesc, Context};
 use crate::init::InitMethod;
 use crate::mesh::{self, TriMesh};
 use crate::param::admm::AdmmOptions;
-use crate::param::SolverChoice;
 use crate::{Error, Result};
 
 pub use crate::gpu::interop::{ForeignBuffer, ForeignCommandBuffer, HostAccess};
@@ -361,30 +362,8 @@ impl Engine {
         faces: &[[u32; 3]],
         opts: &EmbedOptions,
     ) -> Result<Vec<[f64; 2]>> {
-        let file = Path::new(MEMORY_FILE);
-        let mesh = TriMesh {
-            positions: positions.to_vec(),
-            faces: faces.to_vec(),
-        };
-        let (_report, topo) = mesh::validate::validate_with_topology(&mesh, file, &opts.validate)?;
-        topo.require_disk(file)?;
-        // Solved at unit scale and mapped back exactly (see `mesh::Scale`), as `param` does.
-        let (scale, unit) = mesh::Scale::normalized(&mesh);
-        let map = crate::param::compute_map(
-            &unit,
-            &topo,
-            opts.init,
-            SolverChoice::Admm,
-            &opts.admm,
-            Some(&self.ctx),
-            false,
-            &mut |_| {},
-        )?;
-        Ok(map
-            .uv
-            .iter()
-            .map(|t| [scale.length(t[0]), scale.length(t[1])])
-            .collect())
+        self.start_parameterize(positions, faces, opts, &JobOptions::blocking())?
+            .finish()
     }
 
     /// Reads a mesh out of the host's buffers (see [`MeshBuffers`]): one gather kernel per
