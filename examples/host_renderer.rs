@@ -19,7 +19,7 @@ use std::error::Error;
 use std::ffi::{c_char, c_void, CStr};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use ash::vk;
 use foldfree::embed::{
@@ -568,6 +568,307 @@ pub fn run(host: &Host, mesh: &TriMesh) -> BoxResult<RunOutput> {
     out
 }
 
+/// The host's frame: clear a `size`² RGBA8 offscreen image to a colour that changes every
+/// frame and copy it into a host-visible buffer (a renderer's clear-and-read-back, the stand-in
+/// for drawing on a device without a window), submitted on the host's queue and waited for
+/// with the host's fence. Recorded once, submitted every frame.
+pub struct Frame {
+    image: vk::Image,
+    memory: vk::DeviceMemory,
+    readback: HostBuffer,
+    pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
+    fence: vk::Fence,
+}
+
+impl Frame {
+    pub fn new(host: &Host, size: u32) -> BoxResult<Frame> {
+        let info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(vk::Format::R8G8B8A8_UNORM)
+            .extent(vk::Extent3D {
+                width: size,
+                height: size,
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(1)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(vk::ImageUsageFlags::TRANSFER_DST | vk::ImageUsageFlags::TRANSFER_SRC)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        // SAFETY: valid create info on a live device.
+        let image = unsafe { host.device.create_image(&info, None) }?;
+        // SAFETY: `image` is a live image of this device.
+        let req = unsafe { host.device.get_image_memory_requirements(image) };
+        let type_index = (0..host.memory_properties.memory_type_count)
+            .find(|&i| req.memory_type_bits & (1 << i) != 0)
+            .ok_or("no memory type for the offscreen image")?;
+        let alloc = vk::MemoryAllocateInfo::default()
+            .allocation_size(req.size)
+            .memory_type_index(type_index);
+        // SAFETY: valid allocate info.
+        let memory = unsafe { host.device.allocate_memory(&alloc, None) }?;
+        // SAFETY: fresh memory of a type the image allows, large enough, offset 0.
+        unsafe { host.device.bind_image_memory(image, memory, 0) }?;
+        let bytes = u64::from(size) * u64::from(size) * 4;
+        let readback = host.create_buffer(bytes, vk::BufferUsageFlags::TRANSFER_DST)?;
+        let pool_info =
+            vk::CommandPoolCreateInfo::default().queue_family_index(host.queue_family_index);
+        // SAFETY: valid create info.
+        let pool = unsafe { host.device.create_command_pool(&pool_info, None) }?;
+        let alloc = vk::CommandBufferAllocateInfo::default()
+            .command_pool(pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: the pool is live.
+        let cmd = unsafe { host.device.allocate_command_buffers(&alloc) }?[0];
+        // SAFETY: valid create info.
+        let fence = unsafe {
+            host.device
+                .create_fence(&vk::FenceCreateInfo::default(), None)
+        }?;
+        let frame = Frame {
+            image,
+            memory,
+            readback,
+            pool,
+            cmd,
+            fence,
+        };
+        frame.record(host, size)?;
+        Ok(frame)
+    }
+
+    fn record(&self, host: &Host, size: u32) -> BoxResult<()> {
+        let d = &host.device;
+        let range = vk::ImageSubresourceRange::default()
+            .aspect_mask(vk::ImageAspectFlags::COLOR)
+            .level_count(1)
+            .layer_count(1);
+        // SAFETY: a fresh command buffer in the initial state.
+        unsafe { d.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default()) }?;
+        // Last frame's copy (and host read) → this frame's clear; contents discarded.
+        let to_clear = vk::ImageMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_READ)
+            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .old_layout(vk::ImageLayout::UNDEFINED)
+            .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .image(self.image)
+            .subresource_range(range);
+        // SAFETY: recording; the image is live.
+        unsafe {
+            d.cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[to_clear],
+            )
+        };
+        let colour = vk::ClearColorValue {
+            float32: [0.2, 0.4, 0.8, 1.0],
+        };
+        // SAFETY: recording; the image is in TRANSFER_DST_OPTIMAL with TRANSFER_DST usage.
+        unsafe {
+            d.cmd_clear_color_image(
+                self.cmd,
+                self.image,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &colour,
+                &[range],
+            )
+        };
+        let to_copy = vk::ImageMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
+            .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+            .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .image(self.image)
+            .subresource_range(range);
+        // Last frame's host read of the read-back buffer → this frame's copy into it.
+        let buffer_reuse = vk::BufferMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::HOST_READ)
+            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .buffer(self.readback.raw)
+            .size(vk::WHOLE_SIZE);
+        // SAFETY: recording; image and buffer are live.
+        unsafe {
+            d.cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::HOST,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[buffer_reuse],
+                &[to_copy],
+            )
+        };
+        let region = vk::BufferImageCopy::default()
+            .image_subresource(
+                vk::ImageSubresourceLayers::default()
+                    .aspect_mask(vk::ImageAspectFlags::COLOR)
+                    .layer_count(1),
+            )
+            .image_extent(vk::Extent3D {
+                width: size,
+                height: size,
+                depth: 1,
+            });
+        // SAFETY: recording; the image is TRANSFER_SRC_OPTIMAL; the buffer holds size² texels.
+        unsafe {
+            d.cmd_copy_image_to_buffer(
+                self.cmd,
+                self.image,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                self.readback.raw,
+                &[region],
+            )
+        };
+        let to_host = vk::BufferMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .buffer(self.readback.raw)
+            .size(vk::WHOLE_SIZE);
+        // SAFETY: recording; the buffer is live.
+        unsafe {
+            d.cmd_pipeline_barrier(
+                self.cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[to_host],
+                &[],
+            )
+        };
+        // SAFETY: recording.
+        unsafe { d.end_command_buffer(self.cmd) }?;
+        Ok(())
+    }
+
+    /// Submits the frame and waits for it; returns the first texel as a check.
+    pub fn draw(&self, host: &Host) -> BoxResult<u32> {
+        let cmds = [self.cmd];
+        let submit = vk::SubmitInfo::default().command_buffers(&cmds);
+        // SAFETY: the host owns its queue on this thread (the engine's job submits only inside
+        // `Job::poll`, called on this thread); the fence is unsignalled and unused; the command
+        // buffer is executable and not pending (the last frame was waited for).
+        unsafe { host.device.queue_submit(host.queue, &[submit], self.fence) }?;
+        // SAFETY: our fence, just submitted.
+        unsafe { host.device.wait_for_fences(&[self.fence], true, u64::MAX) }?;
+        // SAFETY: signalled, no pending submission uses it.
+        unsafe { host.device.reset_fences(&[self.fence]) }?;
+        Ok(host.read_buffer::<u32>(&self.readback)[0])
+    }
+
+    pub fn destroy(self, host: &Host) {
+        // SAFETY: every submission of the command buffer was waited for.
+        unsafe { host.device.destroy_command_pool(self.pool, None) };
+        // SAFETY: unused (waited for and reset).
+        unsafe { host.device.destroy_fence(self.fence, None) };
+        // SAFETY: no pending work uses the image.
+        unsafe { host.device.destroy_image(self.image, None) };
+        // SAFETY: the image bound to it is destroyed.
+        unsafe { host.device.free_memory(self.memory, None) };
+        host.destroy_buffer(self.readback);
+    }
+}
+
+/// Frame times of the host's loop, without and with a parameterization job on its queue.
+pub struct FrameLoop {
+    pub idle: Vec<Duration>,
+    pub busy: Vec<Duration>,
+    pub job_seconds: f64,
+    pub progress: embed::JobProgress,
+    pub uv: Vec<[f64; 2]>,
+}
+
+/// The frame loop: `idle_frames` frames alone, then frames while a job (slices of `budget`
+/// device time, on the host's queue between frames) parameterizes `mesh` — each frame polls
+/// the job once, then draws. The job's UVs come back with the times.
+pub fn frame_loop(
+    host: &Host,
+    mesh: &TriMesh,
+    idle_frames: usize,
+    budget: Duration,
+) -> BoxResult<FrameLoop> {
+    const FRAME_TEXELS: u32 = 1024;
+    let frame = Frame::new(host, FRAME_TEXELS)?;
+    let result = (|| -> BoxResult<FrameLoop> {
+        let expected = frame.draw(host)?;
+        let mut idle = Vec::with_capacity(idle_frames);
+        for _ in 0..idle_frames {
+            let t = Instant::now();
+            frame.draw(host)?;
+            idle.push(t.elapsed());
+        }
+        // SAFETY: the handles come from `host`, which outlives the engine (dropped at the end
+        // of this closure); the device has `required_features()`; this thread submits to the
+        // queue only between the job's `poll` calls, which are on this thread too.
+        let ctx = unsafe { Context::from_host(host.host_desc()) }?;
+        let engine = Engine::new(ctx)?;
+        let opts = embed::JobOptions {
+            queue: embed::JobQueue::BetweenFrames,
+            slice_budget: budget,
+        };
+        let t0 = Instant::now();
+        let mut job = engine.start_parameterize(
+            &mesh.positions,
+            &mesh.faces,
+            &EmbedOptions::default(),
+            &opts,
+        )?;
+        let mut busy = Vec::new();
+        loop {
+            let t = Instant::now();
+            let done = job.poll();
+            if frame.draw(host)? != expected {
+                return Err("the frame's read-back changed while the job ran".into());
+            }
+            busy.push(t.elapsed());
+            if done {
+                break;
+            }
+        }
+        let job_seconds = t0.elapsed().as_secs_f64();
+        let progress = job.progress();
+        let uv = job.finish()?;
+        drop(engine);
+        Ok(FrameLoop {
+            idle,
+            busy,
+            job_seconds,
+            progress,
+            uv,
+        })
+    })();
+    frame.destroy(host);
+    result
+}
+
+/// `(median, 99th percentile, max)` of frame times.
+pub fn distribution(times: &[Duration]) -> (Duration, Duration, Duration) {
+    let mut t = times.to_vec();
+    t.sort();
+    if t.is_empty() {
+        return (Duration::ZERO, Duration::ZERO, Duration::ZERO);
+    }
+    let at = |q: f64| t[((t.len() - 1) as f64 * q).round() as usize];
+    (at(0.5), at(0.99), t[t.len() - 1])
+}
+
 fn env_on(name: &str) -> bool {
     std::env::var(name).is_ok_and(|v| v == "1")
 }
@@ -625,7 +926,7 @@ fn main() -> BoxResult<()> {
     println!("positions intact: {}", out.positions_intact);
     let messages = host.take_messages();
     println!(
-        "validation: {}",
+        "validation (parameterize + UV writes): {}",
         if !validation {
             "off".to_string()
         } else {
@@ -635,10 +936,59 @@ fn main() -> BoxResult<()> {
     for m in &messages {
         println!("  {m}");
     }
+    let budget_ms: f64 = std::env::var("FOLDFREE_SLICE_MS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(4.0);
+    let budget = Duration::from_secs_f64(budget_ms / 1000.0);
+    let frames = frame_loop(&host, &mesh, 200, budget)?;
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let (m0, p0, x0) = distribution(&frames.idle);
+    let (m1, p1, x1) = distribution(&frames.busy);
+    println!("frame loop (clear + read back 1024² RGBA8 per frame), slice budget {budget_ms} ms:");
+    println!(
+        "  without a job: {} frames, median {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        frames.idle.len(),
+        ms(m0),
+        ms(p0),
+        ms(x0)
+    );
+    println!(
+        "  with the job:  {} frames, median {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        frames.busy.len(),
+        ms(m1),
+        ms(p1),
+        ms(x1)
+    );
+    let p = &frames.progress;
+    println!(
+        "  job: {:.2} s wall, {} iterations in {} slices, device {:.0} ms, longest slice {:.2} ms",
+        frames.job_seconds,
+        p.iterations,
+        p.slices,
+        ms(p.device_time),
+        ms(p.longest_slice)
+    );
+    let same = frames.uv.len() == out.uv.len()
+        && frames
+            .uv
+            .iter()
+            .zip(&out.uv)
+            .all(|(a, b)| a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits());
+    println!("  job UVs identical to the blocking call's: {same}");
+    let bound = x0 * 2 + budget;
+    println!(
+        "  longest frame with the job {:.2} ms vs bound 2 × {:.2} + {budget_ms} = {:.2} ms: {}",
+        ms(x1),
+        ms(x0),
+        ms(bound),
+        if x1 <= bound { "within" } else { "OVER" }
+    );
+    let messages = [messages, host.take_messages()].concat();
     drop(host);
     println!("host objects destroyed by the host");
-    if !messages.is_empty() || !out.positions_intact {
-        return Err("validation messages or clobbered positions".into());
+    if !messages.is_empty() || !out.positions_intact || !same {
+        return Err("validation messages, clobbered positions or a job result that differs".into());
     }
     Ok(())
 }

@@ -366,6 +366,7 @@ fn gpu_face_newton(
         energy: energy.code(),
         newton_iters: iters,
         save_prev: 1,
+        first: 0,
     };
     dispatch_once(
         ctx,
@@ -394,7 +395,11 @@ fn gpu_edge_project(ctx: &Context, c: &Case, mu: f32) -> Vec<[f64; 4]> {
         "test.edge_project",
         shaders::ADMM_EDGE_PROJECT,
         &[&a, &y, &l, &dp.slot_face, &dp.slot_dir],
-        &MuCountPush { mu, n: n_edges },
+        &MuCountPush {
+            mu,
+            n: n_edges,
+            first: 0,
+        },
         n_edges,
     );
     f64x4(&y.read::<[f32; 4]>().expect("read Y"), ns)
@@ -412,7 +417,11 @@ fn gpu_dual_update(ctx: &Context, c: &Case, mu: f32) -> Vec<[f64; 4]> {
         "test.dual_update",
         shaders::ADMM_DUAL_UPDATE,
         &[&a, &y, &l, &dp.slot_face],
-        &MuCountPush { mu, n: ns as u32 },
+        &MuCountPush {
+            mu,
+            n: ns as u32,
+            first: 0,
+        },
         ns as u32,
     );
     f64x4(&l.read::<[f32; 4]>().expect("read Λ"), ns)

@@ -458,6 +458,32 @@ fn a_job_polled_to_completion_matches_the_blocking_call() {
             "vertex {i}: job {a:?} vs blocking {b:?}"
         );
     }
+
+    // Slices far below one iteration's time: every iteration is split into kernel ranges,
+    // still the same arithmetic.
+    let mut short = EmbedOptions::default();
+    short.admm.max_iters = 40;
+    let blocking = engine
+        .parameterize(&mesh.positions, &mesh.faces, &short)
+        .expect("blocking call");
+    let tiny = JobOptions {
+        slice_budget: std::time::Duration::from_micros(100),
+        ..sliced
+    };
+    let mut job = engine
+        .start_parameterize(&mesh.positions, &mesh.faces, &short, &tiny)
+        .expect("start");
+    while !job.poll() {}
+    let p = job.progress();
+    assert!(
+        p.slices > 3 * p.iterations,
+        "iterations were not split: {p:?}"
+    );
+    let uv = job.finish().expect("job result");
+    assert!(uv
+        .iter()
+        .zip(&blocking)
+        .all(|(a, b)| a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits()));
     drop(engine);
     assert_silent(&host, "running a job by poll()");
 }

@@ -16,10 +16,12 @@ layout(std430, set = 0, binding = 3) readonly buffer SlotFace { uint slot_face[]
 layout(push_constant) uniform Push {
     float mu;
     uint n_slots;
+    // First element of this dispatch: an iteration may be split into ranges (job slices).
+    uint first;
 } pc;
 
 void main() {
-    uint s = global_index();
+    uint s = pc.first + global_index();
     if (s >= pc.n_slots) return;
     L[s] += pc.mu * (Y[s] - A[slot_face[s]]);
 }

@@ -19,10 +19,12 @@ layout(std430, set = 0, binding = 4) readonly buffer SlotDir { vec2 slot_dir[]; 
 layout(push_constant) uniform Push {
     float mu;
     uint n_edges;
+    // First element of this dispatch: an iteration may be split into ranges (job slices).
+    uint first;
 } pc;
 
 void main() {
-    uint i = global_index();
+    uint i = pc.first + global_index();
     if (i >= pc.n_edges) return;
     uint s1 = 2u * i;
     uint s2 = s1 + 1u;

@@ -26,6 +26,8 @@ layout(push_constant) uniform Push {
     uint energy;
     uint newton_iters;
     uint save_prev;
+    // First element of this dispatch: an iteration may be split into ranges (job slices).
+    uint first;
 } pc;
 
 const int MAX_HALVINGS = 24;
@@ -40,7 +42,7 @@ float face_objective(uint kind, vec4 a, vec4 bbar, float nmu, float w) {
 }
 
 void main() {
-    uint f = global_index();
+    uint f = pc.first + global_index();
     if (f >= pc.n_faces) return;
     vec4 a = A[f];
     if (pc.save_prev != 0u) A_prev[f] = a;

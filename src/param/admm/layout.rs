@@ -14,6 +14,8 @@ pub struct FacePush {
     pub energy: u32,
     pub newton_iters: u32,
     pub save_prev: u32,
+    /// First face of the dispatch (`n_faces` is the end): a split iteration's range.
+    pub first: u32,
 }
 
 /// `edge_project.comp` and `dual_update.comp` (`n` = interior edges or slots).
@@ -21,7 +23,10 @@ pub struct FacePush {
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct MuCountPush {
     pub mu: f32,
+    /// End of the range (interior edges or slots).
     pub n: u32,
+    /// First element of the dispatch.
+    pub first: u32,
 }
 
 /// `residual.comp`.
@@ -33,6 +38,6 @@ pub struct ResidualPush {
     pub energy: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<FacePush>() == 20);
-const _: () = assert!(std::mem::size_of::<MuCountPush>() == 8);
+const _: () = assert!(std::mem::size_of::<FacePush>() == 24);
+const _: () = assert!(std::mem::size_of::<MuCountPush>() == 12);
 const _: () = assert!(std::mem::size_of::<ResidualPush>() == 12);

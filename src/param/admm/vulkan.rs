@@ -95,14 +95,53 @@ pub struct VulkanExecutor {
     slices: Option<Slices>,
 }
 
+fn not_sliced() -> GpuError {
+    GpuError::Invalid("admm: a split iteration needs a job's slicing".into())
+}
+
+/// The three kernels of an iteration, in order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kernel {
+    Face = 0,
+    Edge = 1,
+    Dual = 2,
+}
+
 /// The executor's side of a [`Slicing`].
 struct Slices {
     plan: Slicing,
     /// Start and end of the current slice (`None` when the queue has no timestamps).
     stamps: Option<TimestampPool>,
     next_value: u64,
-    /// Measured device time per iteration, once a slice has run.
-    ns_per_iteration: Option<f64>,
+    /// Device time per iteration, once a slice has run.
+    ns_per_iteration: Rate,
+    /// Device time per element of each [`Kernel`] (from split iterations).
+    ns_per_element: [Rate; 3],
+}
+
+/// A cost rate from the last few measurements, estimated by their maximum: the same work can
+/// take a few times longer when the device is shared (on a CPU device, with the host's own
+/// threads), and a slice sized for the worst recent case stays inside its budget where one
+/// sized for the mean overshoots every other time. On a dedicated GPU the spread is small and
+/// the maximum is close to the mean.
+#[derive(Clone, Debug, Default)]
+struct Rate {
+    recent: std::collections::VecDeque<f64>,
+}
+
+impl Rate {
+    const WINDOW: usize = 16;
+
+    fn push(&mut self, x: f64) {
+        if self.recent.len() == Self::WINDOW {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(x);
+    }
+
+    fn estimate(&self) -> Option<f64> {
+        self.recent.iter().copied().reduce(f64::max)
+    }
 }
 
 fn to_f32x4(v: &[[f64; 4]]) -> Vec<[f32; 4]> {
@@ -227,7 +266,8 @@ impl VulkanExecutor {
                     None
                 },
                 next_value: plan.timeline.value()? + 1,
-                ns_per_iteration: None,
+                ns_per_iteration: Rate::default(),
+                ns_per_element: Default::default(),
                 plan,
             }),
         };
@@ -369,13 +409,24 @@ impl VulkanExecutor {
         Ok(all)
     }
 
+    /// Whether one iteration is measured to take longer than a slice may.
+    fn iteration_exceeds_budget(&self) -> bool {
+        self.slices.as_ref().is_some_and(|sl| {
+            sl.plan.budget != Duration::MAX
+                && sl
+                    .ns_per_iteration
+                    .estimate()
+                    .is_some_and(|t| t > sl.plan.budget.as_nanos() as f64)
+        })
+    }
+
     /// Iterations of the next slice out of `remaining`: all of them unless sliced; when
     /// sliced, as many as fit the budget at the measured rate (one until measured).
     fn slice_len(&self, remaining: usize) -> usize {
         match &self.slices {
             None => remaining,
             Some(sl) if sl.plan.budget == Duration::MAX => remaining,
-            Some(sl) => match sl.ns_per_iteration {
+            Some(sl) => match sl.ns_per_iteration.estimate() {
                 None => 1,
                 Some(t) => {
                     let fit = sl.plan.budget.as_nanos() as f64 / t.max(1.0);
@@ -409,45 +460,118 @@ impl VulkanExecutor {
     }
 
     fn record_iteration(&mut self, mu: f32, save_prev: bool, stamps: Option<&TimestampPool>) {
-        let rec = &mut self.recorder;
         let ts = |rec: &mut Recorder, i: u32| {
             if let Some(pool) = stamps {
                 rec.write_timestamp(pool, i);
             }
         };
-        ts(rec, 0);
-        let (p, s) = &self.kernels.face;
-        rec.bind(p, s);
-        rec.push(&FacePush {
-            mu,
-            n_faces: self.n_faces,
-            energy: self.energy.code(),
-            newton_iters: self.newton_iters,
-            save_prev: save_prev as u32,
-        });
-        rec.dispatch_1d(self.n_faces);
+        ts(&mut self.recorder, 0);
+        self.record_piece(Kernel::Face, 0, self.n_faces, mu, save_prev);
+        ts(&mut self.recorder, 1);
+        self.record_piece(Kernel::Edge, 0, self.n_slots / 2, mu, save_prev);
+        ts(&mut self.recorder, 2);
+        self.record_piece(Kernel::Dual, 0, self.n_slots, mu, save_prev);
+        ts(&mut self.recorder, 3);
+    }
+
+    /// One kernel over elements `first..end` (faces, interior edges or slots), then the
+    /// compute→compute barrier the next dispatch needs.
+    fn record_piece(&mut self, kernel: Kernel, first: u32, end: u32, mu: f32, save_prev: bool) {
+        if end <= first {
+            return;
+        }
+        let rec = &mut self.recorder;
+        match kernel {
+            Kernel::Face => {
+                let (p, s) = &self.kernels.face;
+                rec.bind(p, s);
+                rec.push(&FacePush {
+                    mu,
+                    n_faces: end,
+                    energy: self.energy.code(),
+                    newton_iters: self.newton_iters,
+                    save_prev: save_prev as u32,
+                    first,
+                });
+            }
+            Kernel::Edge | Kernel::Dual => {
+                let (p, s) = if kernel == Kernel::Edge {
+                    &self.kernels.edge
+                } else {
+                    &self.kernels.dual
+                };
+                rec.bind(p, s);
+                rec.push(&MuCountPush { mu, n: end, first });
+            }
+        }
+        rec.dispatch_1d(end - first);
         rec.barrier(Access::ComputeReadWrite, Access::ComputeReadWrite);
-        ts(rec, 1);
-        let n_edges = self.n_slots / 2;
-        if n_edges > 0 {
-            let (p, s) = &self.kernels.edge;
-            rec.bind(p, s);
-            rec.push(&MuCountPush { mu, n: n_edges });
-            rec.dispatch_1d(n_edges);
-            rec.barrier(Access::ComputeReadWrite, Access::ComputeReadWrite);
+    }
+
+    /// Elements of `kernel`'s dispatch in one iteration.
+    fn count(&self, kernel: Kernel) -> u32 {
+        match kernel {
+            Kernel::Face => self.n_faces,
+            Kernel::Edge => self.n_slots / 2,
+            Kernel::Dual => self.n_slots,
         }
-        ts(rec, 2);
-        if self.n_slots > 0 {
-            let (p, s) = &self.kernels.dual;
-            rec.bind(p, s);
-            rec.push(&MuCountPush {
-                mu,
-                n: self.n_slots,
-            });
-            rec.dispatch_1d(self.n_slots);
-            rec.barrier(Access::ComputeReadWrite, Access::ComputeReadWrite);
+    }
+
+    /// One iteration cut into pieces of about the slice budget, one piece per slice: used when
+    /// a whole iteration takes longer than the budget (large meshes, slow devices). Each
+    /// kernel's elements are independent, so the pieces compute exactly what one dispatch
+    /// would. Piece sizes come from each kernel's measured time per element (until measured,
+    /// the iteration's time split evenly).
+    fn split_iteration(&mut self, mu: f32, last: bool) -> Result<(), GpuError> {
+        for kernel in [Kernel::Face, Kernel::Edge, Kernel::Dual] {
+            let n = self.count(kernel);
+            let mut first = 0;
+            while first < n {
+                let Some(sl) = self.slices.as_ref() else {
+                    return Err(not_sliced());
+                };
+                let budget = sl.plan.budget.as_nanos() as f64;
+                let per = sl.ns_per_element[kernel as usize]
+                    .estimate()
+                    .unwrap_or_else(|| {
+                        let per_iteration = sl.ns_per_iteration.estimate().unwrap_or(budget);
+                        let pieces = (per_iteration / budget).ceil().max(1.0);
+                        budget / (f64::from(n) / pieces).max(1.0)
+                    });
+                // At least a workgroup's worth, at most what is left.
+                let len = ((budget / per.max(1e-3)).floor() as u32)
+                    .max(64)
+                    .min(n - first);
+                let end = first + len;
+                self.open()?;
+                self.record_piece(kernel, first, end, mu, last);
+                let tail = last && kernel == Kernel::Dual && end == n;
+                if tail {
+                    self.record_residual();
+                }
+                let ns = self.close()?.unwrap_or(0);
+                if let (false, Some(sl)) = (tail, self.slices.as_mut()) {
+                    sl.ns_per_element[kernel as usize].push(ns as f64 / f64::from(end - first));
+                }
+                first = end;
+            }
         }
-        ts(rec, 3);
+        let counts = [Kernel::Face, Kernel::Edge, Kernel::Dual].map(|k| f64::from(self.count(k)));
+        let Some(sl) = self.slices.as_mut() else {
+            return Err(not_sliced());
+        };
+        // The iteration's cost from its kernels' rates: decides whether the next one fits.
+        let total: Option<f64> = sl
+            .ns_per_element
+            .iter()
+            .zip(counts)
+            .map(|(r, n)| r.estimate().map(|r| r * n))
+            .sum();
+        if let Some(t) = total {
+            sl.ns_per_iteration.push(t);
+        }
+        sl.plan.stats.iterations.fetch_add(1, Ordering::Relaxed);
+        Ok(())
     }
 
     fn record_residual(&mut self) {
@@ -502,6 +626,11 @@ impl Executor for VulkanExecutor {
         let profiled = self.profile.as_ref().map(|(pool, _)| pool.clone());
         let mut done = 0;
         while done < n {
+            if profiled.is_none() && self.iteration_exceeds_budget() {
+                self.split_iteration(mu, done + 1 == n)?;
+                done += 1;
+                continue;
+            }
             let len = if profiled.is_some() {
                 1
             } else {
@@ -521,7 +650,7 @@ impl Executor for VulkanExecutor {
             }
             let slice_ns = self.close()?;
             if let (Some(sl), Some(ns)) = (&mut self.slices, slice_ns) {
-                sl.ns_per_iteration = Some(ns as f64 / len as f64);
+                sl.ns_per_iteration.push(ns as f64 / len as f64);
                 sl.plan
                     .stats
                     .iterations
