@@ -141,3 +141,185 @@ pub fn device_bandwidth(ctx: &crate::gpu::Context, n: u32, reps: u32) -> Result<
     }
     Ok(12.0 * f64::from(n) / best.max(1.0))
 }
+
+/// One mesh's device profile ([`profile_mesh`]).
+#[derive(Clone, Debug)]
+pub struct DeviceProfile {
+    pub mesh: String,
+    pub faces: usize,
+    pub device: String,
+    pub iterations: usize,
+    /// Device time per iteration of face_newton, edge_project, dual_update (ns, timestamps).
+    pub kernel_ns: [f64; 3],
+    /// Bytes each of those kernels reads and writes per iteration.
+    pub kernel_bytes: [u64; 3],
+    /// The device's streaming rate (saxpy), GB/s.
+    pub stream_gbs: f64,
+    /// Wall time per iteration of unprofiled batches (as the driver submits them).
+    pub wall_ns_per_iteration: f64,
+    /// Device time per iteration of those batches (a timestamp pair per batch).
+    pub device_ns_per_iteration: f64,
+    /// `foldfree param` end to end on the Vulkan and CPU backends (s), default options.
+    pub seconds_vulkan: Option<f64>,
+    pub seconds_cpu: Option<f64>,
+}
+
+impl DeviceProfile {
+    /// The Markdown table: per kernel time, share, bytes, achieved rate and its fraction of
+    /// the streaming rate; then dispatch overhead and the end-to-end comparison.
+    pub fn table(&self) -> String {
+        let names = ["face_newton", "edge_project", "dual_update"];
+        let device_ns: f64 = self.kernel_ns.iter().sum();
+        let mut t = format!(
+            "{} ({} faces) on {} — {} profiled iterations; streaming rate (saxpy) {:.2} GB/s\n\n\
+             | kernel | µs/iteration | share | KB/iteration | GB/s achieved | % of streaming |\n\
+             |---|---|---|---|---|---|\n",
+            self.mesh, self.faces, self.device, self.iterations, self.stream_gbs
+        );
+        for k in 0..3 {
+            let gbs = self.kernel_bytes[k] as f64 / self.kernel_ns[k].max(1e-9);
+            let _ = writeln!(
+                t,
+                "| {} | {:.1} | {:.0} % | {:.1} | {:.2} | {:.0} % |",
+                names[k],
+                self.kernel_ns[k] / 1e3,
+                100.0 * self.kernel_ns[k] / device_ns.max(1e-9),
+                self.kernel_bytes[k] as f64 / 1e3,
+                gbs,
+                100.0 * gbs / self.stream_gbs.max(1e-9)
+            );
+        }
+        let bytes: u64 = self.kernel_bytes.iter().sum();
+        let rows = [
+            ("iteration, device (kernels timed apart)", device_ns),
+            (
+                "iteration, device (unprofiled batches)",
+                self.device_ns_per_iteration,
+            ),
+        ];
+        for (what, ns) in rows {
+            let gbs = bytes as f64 / ns.max(1e-9);
+            let _ = writeln!(
+                t,
+                "| {what} | {:.1} | | {:.1} | {:.2} | {:.0} % |",
+                ns / 1e3,
+                bytes as f64 / 1e3,
+                gbs,
+                100.0 * gbs / self.stream_gbs.max(1e-9)
+            );
+        }
+        let _ = writeln!(
+            t,
+            "| iteration, wall (unprofiled batches of the driver) | {:.1} | | | | |",
+            self.wall_ns_per_iteration / 1e3
+        );
+        let _ = writeln!(
+            t,
+            "| dispatch + submission + host overhead (wall − device) | {:.1} | | | | |",
+            (self.wall_ns_per_iteration - self.device_ns_per_iteration) / 1e3
+        );
+        let secs = |s: Option<f64>| s.map_or("failed".to_string(), |s| format!("{s:.2} s"));
+        let ratio = match (self.seconds_vulkan, self.seconds_cpu) {
+            (Some(v), Some(c)) if v > 0.0 => format!("; CPU / Vulkan = {:.2}×", c / v),
+            _ => String::new(),
+        };
+        let _ = writeln!(
+            t,
+            "\nend to end (`foldfree param`, defaults): Vulkan {}, CPU {}{ratio}",
+            secs(self.seconds_vulkan),
+            secs(self.seconds_cpu)
+        );
+        t
+    }
+}
+
+/// Profiles the ADMM iteration of `mesh` on `ctx`: `iterations` iterations with a timestamp
+/// around every kernel (one submission per iteration), the same number in the driver's
+/// unprofiled batches of `check_every` timed by wall clock (the difference is the dispatch and
+/// host overhead), the device's streaming rate, and `foldfree param` end to end on both
+/// backends writing into `out_dir`.
+pub fn profile_mesh(
+    ctx: &crate::gpu::Context,
+    mesh_path: &std::path::Path,
+    iterations: usize,
+    out_dir: &std::path::Path,
+) -> Result<DeviceProfile> {
+    use crate::param::admm::driver::Executor;
+    use crate::param::admm::{vulkan::VulkanExecutor, AdmmProblem, AdmmState};
+    let (mesh, topo, _) = crate::mesh::load(mesh_path, &crate::mesh::ValidateOptions::default())?;
+    topo.require_disk(mesh_path)?;
+    let (_, unit) = crate::mesh::Scale::normalized(&mesh);
+    let frames = crate::mesh::frames::compute(&unit);
+    let mut uv = crate::init::initial_map(&unit, &topo, crate::init::InitMethod::Lscm)?;
+    crate::init::normalize_area(&unit, &mut uv, frames.area.iter().sum());
+    let problem = AdmmProblem::new(&unit, &topo, &frames);
+    let opts = AdmmOptions::default();
+    let mu = opts.initial_mu_rel() / problem.n_faces().max(1) as f64;
+    let state = AdmmState::from_uv(&problem, &unit.faces, &uv);
+    let iterations = iterations.max(1);
+
+    let mut profiled =
+        VulkanExecutor::new(ctx, &problem, opts.energy, opts.newton_iters, true, None)?;
+    profiled.upload(&state)?;
+    profiled.iterate(iterations, mu)?;
+    let times = profiled.kernel_times().cloned().unwrap_or_default();
+    let kernel_bytes = profiled.kernel_bytes();
+    drop(profiled);
+
+    // Unprofiled batches, as the driver submits them, with one timestamp pair per batch.
+    let stats = std::sync::Arc::new(crate::param::admm::vulkan::SliceStats::default());
+    let slicing = crate::param::admm::vulkan::Slicing {
+        timeline: crate::gpu::Timeline::new(ctx, "bench.profile.timeline")?,
+        budget: std::time::Duration::MAX,
+        handoff: None,
+        stats: stats.clone(),
+    };
+    let mut plain = VulkanExecutor::new(
+        ctx,
+        &problem,
+        opts.energy,
+        opts.newton_iters,
+        false,
+        Some(slicing),
+    )?;
+    plain.upload(&state)?;
+    let t = std::time::Instant::now();
+    let mut done = 0;
+    while done < iterations {
+        let n = opts.check_every.max(1).min(iterations - done);
+        plain.iterate(n, mu)?;
+        done += n;
+    }
+    let wall = t.elapsed().as_nanos() as f64 / iterations as f64;
+    drop(plain);
+    let batched =
+        stats.device_ns.load(std::sync::atomic::Ordering::Relaxed) as f64 / iterations as f64;
+
+    let per = |ns: u64| ns as f64 / times.iterations.max(1) as f64;
+    let stem = mesh_path
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let end_to_end = |backend: BackendChoice| -> Option<f64> {
+        let mut job = ParamJob::new(mesh_path, out_dir.join(format!("{stem}-{backend:?}.obj")));
+        job.backend = backend;
+        run_param(&job, &mut |_| {}).ok().map(|o| o.report.seconds)
+    };
+    Ok(DeviceProfile {
+        mesh: stem.clone(),
+        faces: mesh.faces.len(),
+        device: ctx.device_name().to_string(),
+        iterations,
+        kernel_ns: [
+            per(times.face_newton_ns),
+            per(times.edge_project_ns),
+            per(times.dual_update_ns),
+        ],
+        kernel_bytes,
+        stream_gbs: device_bandwidth(ctx, 1 << 24, 5)?,
+        wall_ns_per_iteration: wall,
+        device_ns_per_iteration: batched,
+        seconds_vulkan: end_to_end(BackendChoice::Vulkan),
+        seconds_cpu: end_to_end(BackendChoice::Cpu),
+    })
+}

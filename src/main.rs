@@ -66,6 +66,11 @@ enum Command {
         /// Directory for the output meshes.
         #[arg(long, default_value = "target/bench-out")]
         out_dir: PathBuf,
+        /// Device profile instead: per-kernel timestamps of the ADMM iteration (`--max-iters`
+        /// iterations, default 200), bytes and bandwidth against the device's streaming rate,
+        /// dispatch overhead, and `param` end to end on Vulkan vs CPU (benches/gpu_profile.sh).
+        #[arg(long)]
+        profile: bool,
     },
     /// Foldover-free volumetric map of a tet mesh (Xu & Liu 2022).
     #[command(after_help = VOLMAP_AFTER_HELP)]
@@ -942,6 +947,29 @@ fn run_bench(
     Ok(())
 }
 
+fn run_profile(
+    meshes: Vec<PathBuf>,
+    max_iters: Option<usize>,
+    out_dir: PathBuf,
+) -> foldfree::Result<()> {
+    if meshes.is_empty() {
+        return Err(foldfree::Error::Usage(
+            "bench --profile needs at least one mesh".into(),
+        ));
+    }
+    std::fs::create_dir_all(&out_dir).map_err(|source| foldfree::Error::Io {
+        path: out_dir.clone(),
+        source,
+    })?;
+    let ctx = foldfree::gpu::Context::new(&foldfree::gpu::ContextDesc::default())?;
+    for mesh in &meshes {
+        eprintln!("profiling {} …", mesh.display());
+        let p = foldfree::bench::profile_mesh(&ctx, mesh, max_iters.unwrap_or(200), &out_dir)?;
+        println!("{}", p.table());
+    }
+    Ok(())
+}
+
 fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     let energy = args.energy.map(energy_of);
     let explicit_solver = args.solver.map(|s| match s {
@@ -1210,10 +1238,18 @@ fn main() -> ExitCode {
         Command::Approx(args) => run_approx(args),
         Command::Bench {
             meshes,
+            max_iters,
+            out_dir,
+            profile: true,
+            ..
+        } => run_profile(meshes, max_iters, out_dir),
+        Command::Bench {
+            meshes,
             energy,
             backend,
             max_iters,
             out_dir,
+            profile: false,
         } => run_bench(meshes, energy, backend, max_iters, out_dir),
         Command::Volmap(args) => run_volmap(*args),
         Command::VolmapConstraints(args) => run_volmap_constraints(args),

@@ -3,8 +3,9 @@
 //! host's buffer.
 //!
 //! # Setting up
-//! 1. Create the device with everything [`required_features`] lists (Vulkan 1.2,
-//!    `VK_KHR_synchronization2` and its feature) and a queue family with compute support.
+//! 1. Create the device with everything [`required_features`] lists (Vulkan 1.2 with its
+//!    `timelineSemaphore` feature, `VK_KHR_synchronization2` and its feature) and a queue
+//!    family with compute support.
 //! 2. Lend the handles: `unsafe { Context::from_host(HostDesc { .. }) }` — the one place the
 //!    host vouches for them (see [`crate::gpu::Context::from_host`]) — and wrap the context with
 //!    [`Engine::new`].
@@ -30,11 +31,15 @@
 //! `minStorageBufferOffsetAlignment` to the last UV) must fit in `maxStorageBufferRange`.
 //!
 //! # Synchronisation contract
-//! **Queue.** The engine submits to the host's queue (parameterization: many submissions, each
-//! waited for with the engine's own fence; [`Engine::write_uvs`]: one). A `vk::Queue` needs
-//! external synchronization, so while any engine call runs the host must not submit to, wait
-//! idle on, or present with that queue, nor call `vkDeviceWaitIdle`, from another thread. Between
-//! calls the engine has no work in flight: every call returns only after its fence signalled.
+//! **Queue.** The blocking calls submit to the host's queue (parameterization: one submission
+//! per residual check, each signalling a timeline semaphore the engine waits on;
+//! [`Engine::write_uvs`]: one, with a fence). A `vk::Queue` needs external synchronization, so
+//! while a blocking engine call runs the host must not submit to, wait idle on, or present with
+//! that queue, nor call `vkDeviceWaitIdle`, from another thread. Between calls the engine has no
+//! work in flight: every call returns only after its work completed. A [`Job`]
+//! ([`Engine::start_parameterize`]) instead touches the host's queue only inside
+//! [`Job::poll`] / [`Job::finish`] on the host's thread (`JobQueue::BetweenFrames`), or only a
+//! queue the host gave it alone (`JobQueue::Own`); see the [`job`] module docs.
 //!
 //! **[`Engine::write_uvs`] (engine submits).** Entry: the engine's command buffer starts with a
 //! barrier from all earlier commands' writes on the queue (`ALL_COMMANDS`/`HOST`,
@@ -70,7 +75,7 @@
 //!   two threads at once is the host's error (Vulkan requires external synchronization).
 #![forbid(unsafe_code)]
 
-mod job;
+pub mod job;
 
 pub use job::{Job, JobOptions, JobPhase, JobProgress, JobQueue};
 

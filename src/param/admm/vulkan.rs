@@ -447,11 +447,17 @@ impl VulkanExecutor {
     /// each slot; edge = per slot A, Λ, face index, direction read and Y written; dual = per
     /// slot A, Y, face index read and Λ read/written.
     pub fn bytes_per_iteration(&self) -> u64 {
+        self.kernel_bytes().iter().sum()
+    }
+
+    /// [`VulkanExecutor::bytes_per_iteration`] per kernel: face_newton, edge_project,
+    /// dual_update.
+    pub fn kernel_bytes(&self) -> [u64; 3] {
         let (f, s) = (u64::from(self.n_faces), u64::from(self.n_slots));
         let face = f * (16 + 16 + 16 + 4) + s * 32;
         let edge = s * (16 + 16 + 4 + 8 + 16);
         let dual = s * (16 + 16 + 4 + 16 + 16);
-        face + edge + dual
+        [face, edge, dual]
     }
 
     /// The context (for its validation messages).
