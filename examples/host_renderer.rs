@@ -9,11 +9,12 @@
 //! `tests/data/camel_open.obj`, has the engine write the UVs into the vertex buffer (once by
 //! the engine's own submission, once recorded into the host's command buffer), reads the buffer
 //! back, prints summary statistics, and destroys its own objects after the engine is dropped —
-//! proving the engine destroyed none of them. Then a frame loop: 200 frames alone (each clears a
-//! 1024² RGBA8 offscreen image and reads it back, on the host's queue with the host's fence),
-//! then frames while an `embed::Job` parameterizes the same mesh between them (`poll()` once
-//! per frame, slices of `FOLDFREE_SLICE_MS` device time, default 4), and the frame-time
-//! distribution of both, checking the job's UVs against the blocking call's bit for bit.
+//! proving the engine destroyed none of them. Then a frame loop: frames (each clears a 1024²
+//! RGBA8 offscreen image and reads one texel back, on the host's queue with the host's fence)
+//! while an `embed::Job` parameterizes the same mesh between them (`poll()` once per frame,
+//! slices of `FOLDFREE_SLICE_MS` device time, default 4), then as many frames without it, and
+//! the frame-time distribution of both, checking the job's UVs against the blocking call's bit
+//! for bit. Frames run back to back unless `FOLDFREE_FRAME_HZ` paces them.
 //!
 //! Run: `cargo run --release --example host_renderer [mesh.obj]`.
 //!
@@ -774,7 +775,12 @@ impl Frame {
         unsafe { host.device.wait_for_fences(&[self.fence], true, u64::MAX) }?;
         // SAFETY: signalled, no pending submission uses it.
         unsafe { host.device.reset_fences(&[self.fence]) }?;
-        Ok(host.read_buffer::<u32>(&self.readback)[0])
+        // One texel, not the whole image: the host's CPU should not compete with the device.
+        let mut first = [0u8; 4];
+        // SAFETY: the mapping covers the buffer (≥ 4 bytes); coherent memory; the frame that
+        // wrote it was waited for.
+        unsafe { std::ptr::copy_nonoverlapping(self.readback.ptr, first.as_mut_ptr(), 4) };
+        Ok(u32::from_ne_bytes(first))
     }
 
     pub fn destroy(self, host: &Host) {
@@ -799,25 +805,35 @@ pub struct FrameLoop {
     pub uv: Vec<[f64; 2]>,
 }
 
-/// The frame loop: `idle_frames` frames alone, then frames while a job (slices of `budget`
-/// device time, on the host's queue between frames) parameterizes `mesh` — each frame polls
-/// the job once, then draws. The job's UVs come back with the times.
+/// The frame loop: frames while a job (slices of `budget` device time, on the host's queue
+/// between frames) parameterizes `mesh` — each frame polls the job once, then draws — then
+/// as many frames alone (at least `idle_frames`), paced at `period` when given. The job's UVs
+/// come back with the times.
 pub fn frame_loop(
     host: &Host,
     mesh: &TriMesh,
     idle_frames: usize,
     budget: Duration,
+    period: Option<Duration>,
 ) -> BoxResult<FrameLoop> {
     const FRAME_TEXELS: u32 = 1024;
     let frame = Frame::new(host, FRAME_TEXELS)?;
     let result = (|| -> BoxResult<FrameLoop> {
         let expected = frame.draw(host)?;
-        let mut idle = Vec::with_capacity(idle_frames);
-        for _ in 0..idle_frames {
-            let t = Instant::now();
-            frame.draw(host)?;
-            idle.push(t.elapsed());
-        }
+        // A renderer's cadence (vsync): sleep until the next frame is due.
+        let mut next = Instant::now();
+        let mut pace = || {
+            if let Some(p) = period {
+                next += p;
+                let now = Instant::now();
+                if next > now {
+                    std::thread::sleep(next - now);
+                } else {
+                    next = now;
+                }
+            }
+        };
+
         // SAFETY: the handles come from `host`, which outlives the engine (dropped at the end
         // of this closure); the device has `required_features()`; this thread submits to the
         // queue only between the job's `poll` calls, which are on this thread too.
@@ -836,6 +852,7 @@ pub fn frame_loop(
         )?;
         let mut busy = Vec::new();
         loop {
+            pace();
             let t = Instant::now();
             let done = job.poll();
             if frame.draw(host)? != expected {
@@ -850,6 +867,16 @@ pub fn frame_loop(
         let progress = job.progress();
         let uv = job.finish()?;
         drop(engine);
+        // As many frames alone as ran with the job (at least `idle_frames`): the maximum of
+        // n samples grows with n, so the two maxima are compared over equal counts.
+        let n_idle = idle_frames.max(busy.len());
+        let mut idle = Vec::with_capacity(n_idle);
+        for _ in 0..n_idle {
+            pace();
+            let t = Instant::now();
+            frame.draw(host)?;
+            idle.push(t.elapsed());
+        }
         Ok(FrameLoop {
             idle,
             busy,
@@ -945,11 +972,19 @@ fn main() -> BoxResult<()> {
         .and_then(|v| v.parse().ok())
         .unwrap_or(4.0);
     let budget = Duration::from_secs_f64(budget_ms / 1000.0);
-    let frames = frame_loop(&host, &mesh, 200, budget)?;
+    // Frames per second of the host's loop (FOLDFREE_FRAME_HZ; 0: back to back, no pacing).
+    let hz: f64 = std::env::var("FOLDFREE_FRAME_HZ")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.0);
+    let period = (hz > 0.0).then(|| Duration::from_secs_f64(1.0 / hz));
+    let frames = frame_loop(&host, &mesh, 200, budget, period)?;
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
     let (m0, p0, x0) = distribution(&frames.idle);
     let (m1, p1, x1) = distribution(&frames.busy);
-    println!("frame loop (clear + read back 1024² RGBA8 per frame), slice budget {budget_ms} ms:");
+    println!(
+        "frame loop (clear + read back 1024² RGBA8 per frame, {hz} Hz), slice budget {budget_ms} ms:"
+    );
     println!(
         "  without a job: {} frames, median {:.2} ms, p99 {:.2} ms, max {:.2} ms",
         frames.idle.len(),

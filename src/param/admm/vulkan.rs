@@ -117,6 +117,25 @@ struct Slices {
     ns_per_iteration: Rate,
     /// Device time per element of each [`Kernel`] (from split iterations).
     ns_per_element: [Rate; 3],
+    /// Measured / planned time of recent slices: how far the device's spread exceeds what the
+    /// rates foresaw. Slices are planned at `budget / max(1, overshoot)`, so that a slice as
+    /// unlucky as the worst recent one still fits the budget.
+    overshoot: Rate,
+}
+
+impl Slices {
+    /// The device time to plan a slice for (ns).
+    fn plan_ns(&self) -> f64 {
+        let spread = self.overshoot.estimate().unwrap_or(1.0).max(1.0);
+        self.plan.budget.as_nanos() as f64 / spread
+    }
+
+    /// Records a slice planned to take `planned` ns that took `ns`.
+    fn measured(&mut self, planned: Option<f64>, ns: u64) {
+        if let Some(p) = planned.filter(|&p| p > 0.0) {
+            self.overshoot.push(ns as f64 / p);
+        }
+    }
 }
 
 /// A cost rate from the last few measurements, estimated by their maximum: the same work can
@@ -124,16 +143,28 @@ struct Slices {
 /// threads), and a slice sized for the worst recent case stays inside its budget where one
 /// sized for the mean overshoots every other time. On a dedicated GPU the spread is small and
 /// the maximum is close to the mean.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 struct Rate {
     recent: std::collections::VecDeque<f64>,
+    window: usize,
+}
+
+impl Default for Rate {
+    fn default() -> Self {
+        Rate::new(16)
+    }
 }
 
 impl Rate {
-    const WINDOW: usize = 16;
+    fn new(window: usize) -> Rate {
+        Rate {
+            recent: std::collections::VecDeque::with_capacity(window),
+            window,
+        }
+    }
 
     fn push(&mut self, x: f64) {
-        if self.recent.len() == Self::WINDOW {
+        if self.recent.len() == self.window {
             self.recent.pop_front();
         }
         self.recent.push_back(x);
@@ -268,6 +299,8 @@ impl VulkanExecutor {
                 next_value: plan.timeline.value()? + 1,
                 ns_per_iteration: Rate::default(),
                 ns_per_element: Default::default(),
+                // Spikes are rarer than rate changes: remember them longer.
+                overshoot: Rate::new(64),
                 plan,
             }),
         };
@@ -416,7 +449,7 @@ impl VulkanExecutor {
                 && sl
                     .ns_per_iteration
                     .estimate()
-                    .is_some_and(|t| t > sl.plan.budget.as_nanos() as f64)
+                    .is_some_and(|t| t > sl.plan_ns())
         })
     }
 
@@ -429,7 +462,7 @@ impl VulkanExecutor {
             Some(sl) => match sl.ns_per_iteration.estimate() {
                 None => 1,
                 Some(t) => {
-                    let fit = sl.plan.budget.as_nanos() as f64 / t.max(1.0);
+                    let fit = sl.plan_ns() / t.max(1.0);
                     (fit.floor() as usize).clamp(1, remaining)
                 }
             },
@@ -536,14 +569,13 @@ impl VulkanExecutor {
                 let Some(sl) = self.slices.as_ref() else {
                     return Err(not_sliced());
                 };
-                let budget = sl.plan.budget.as_nanos() as f64;
-                let per = sl.ns_per_element[kernel as usize]
-                    .estimate()
-                    .unwrap_or_else(|| {
-                        let per_iteration = sl.ns_per_iteration.estimate().unwrap_or(budget);
-                        let pieces = (per_iteration / budget).ceil().max(1.0);
-                        budget / (f64::from(n) / pieces).max(1.0)
-                    });
+                let budget = sl.plan_ns();
+                let measured_rate = sl.ns_per_element[kernel as usize].estimate();
+                let per = measured_rate.unwrap_or_else(|| {
+                    let per_iteration = sl.ns_per_iteration.estimate().unwrap_or(budget);
+                    let pieces = (per_iteration / budget).ceil().max(1.0);
+                    budget / (f64::from(n) / pieces).max(1.0)
+                });
                 // At least a workgroup's worth, at most what is left.
                 let len = ((budget / per.max(1e-3)).floor() as u32)
                     .max(64)
@@ -557,7 +589,8 @@ impl VulkanExecutor {
                 }
                 let ns = self.close()?.unwrap_or(0);
                 if let (false, Some(sl)) = (tail, self.slices.as_mut()) {
-                    sl.ns_per_element[kernel as usize].push(ns as f64 / f64::from(end - first));
+                    sl.measured(measured_rate.map(|r| r * f64::from(len)), ns);
+                    sl.ns_per_element[kernel as usize].push(ns as f64 / f64::from(len));
                 }
                 first = end;
             }
@@ -643,6 +676,11 @@ impl Executor for VulkanExecutor {
                 self.slice_len(n - done)
             };
             let last_chunk = done + len == n;
+            let planned = self
+                .slices
+                .as_ref()
+                .and_then(|sl| sl.ns_per_iteration.estimate())
+                .map(|t| t * len as f64);
             self.open()?;
             for k in 0..len {
                 let save_prev = last_chunk && k + 1 == len;
@@ -656,6 +694,11 @@ impl Executor for VulkanExecutor {
             }
             let slice_ns = self.close()?;
             if let (Some(sl), Some(ns)) = (&mut self.slices, slice_ns) {
+                if !last_chunk {
+                    // The batch's last slice also runs the residual pass, which the rate
+                    // does not foresee.
+                    sl.measured(planned, ns);
+                }
                 sl.ns_per_iteration.push(ns as f64 / len as f64);
                 sl.plan
                     .stats
