@@ -305,6 +305,17 @@ impl Host {
         &self,
         record: impl FnOnce(vk::CommandBuffer) -> BoxResult<()>,
     ) -> BoxResult<()> {
+        self.submit_after(None, record)
+    }
+
+    /// [`Host::submit_once`], the submission waiting (all commands) until the timeline
+    /// semaphore `wait.0` reaches `wait.1` — how a host orders its work after a job's slices
+    /// without a CPU wait.
+    pub fn submit_after(
+        &self,
+        wait: Option<(vk::Semaphore, u64)>,
+        record: impl FnOnce(vk::CommandBuffer) -> BoxResult<()>,
+    ) -> BoxResult<()> {
         let pool_info = vk::CommandPoolCreateInfo::default()
             .flags(vk::CommandPoolCreateFlags::TRANSIENT)
             .queue_family_index(self.queue_family_index);
@@ -330,8 +341,18 @@ impl Host {
                     .create_fence(&vk::FenceCreateInfo::default(), None)
             }?;
             let cmds = [cmd];
-            let submit = vk::SubmitInfo::default().command_buffers(&cmds);
-            // SAFETY: the host is the only user of its queue right now; the fence is fresh.
+            let wait_semaphores: Vec<vk::Semaphore> = wait.iter().map(|w| w.0).collect();
+            let wait_values: Vec<u64> = wait.iter().map(|w| w.1).collect();
+            let wait_stages = vec![vk::PipelineStageFlags::ALL_COMMANDS; wait_values.len()];
+            let mut timeline =
+                vk::TimelineSemaphoreSubmitInfo::default().wait_semaphore_values(&wait_values);
+            let submit = vk::SubmitInfo::default()
+                .command_buffers(&cmds)
+                .wait_semaphores(&wait_semaphores)
+                .wait_dst_stage_mask(&wait_stages)
+                .push_next(&mut timeline);
+            // SAFETY: the host is the only user of its queue right now; the fence is fresh; the
+            // wait names a timeline semaphore with its value (arrays outlive the call).
             let submitted = unsafe { self.device.queue_submit(self.queue, &[submit], fence) };
             let waited = submitted.and_then(|()| {
                 // SAFETY: our fence, just submitted.

@@ -566,3 +566,80 @@ fn cancelling_a_job_leaves_the_device_idle_and_frees_everything() {
     drop(allocator);
     assert_silent(&host, "cancelling a job");
 }
+
+/// A job on a queue of its own (`JobQueue::Own`, slices submitted by the job) gives the same UVs
+/// as the blocking call; meanwhile the host orders a submission of its own after the job's
+/// latest slice by waiting on the job's timeline semaphore in that submission (no CPU wait on
+/// the job). Synchronization validation stays silent.
+#[test]
+fn a_job_on_its_own_queue_matches_and_the_host_can_wait_on_its_timeline() {
+    let Some(host) = validated_host() else {
+        return;
+    };
+    let mesh = foldfree::mesh::read_obj(&host_renderer::default_mesh()).expect("mesh");
+    // SAFETY: the handles come from `host`, which outlives the engine; the device has
+    // `required_features()`. While the `Own` job runs this thread leaves the queue to it; the
+    // `BetweenFrames` job submits only inside `poll`, on this thread, between the host's own
+    // submissions.
+    let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("context");
+    let engine = Engine::new(ctx).expect("engine");
+    let mut opts = EmbedOptions::default();
+    opts.admm.max_iters = 200;
+    let blocking = engine
+        .parameterize(&mesh.positions, &mesh.faces, &opts)
+        .expect("blocking call");
+    let own = JobOptions {
+        queue: JobQueue::Own,
+        slice_budget: std::time::Duration::from_millis(1),
+    };
+    let mut job = engine
+        .start_parameterize(&mesh.positions, &mesh.faces, &opts, &own)
+        .expect("start");
+    let t = std::time::Instant::now();
+    while job.submitted_value() == 0 {
+        assert!(!job.poll() || job.submitted_value() > 0);
+        assert!(t.elapsed().as_secs() < 120, "no slice was submitted");
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let uv = job.finish().expect("job result");
+    assert!(uv
+        .iter()
+        .zip(&blocking)
+        .all(|(a, b)| a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits()));
+
+    // The host's queue is the job's only while it runs (a real host would lend a dedicated
+    // queue); now a BetweenFrames job, and a host submission that waits on its timeline.
+    let sliced = JobOptions {
+        queue: JobQueue::BetweenFrames,
+        slice_budget: std::time::Duration::from_millis(1),
+    };
+    let mut job = engine
+        .start_parameterize(&mesh.positions, &mesh.faces, &opts, &sliced)
+        .expect("start");
+    while job.submitted_value() < 3 {
+        assert!(!job.poll(), "finished before three slices");
+    }
+    let fill = host
+        .create_buffer(16, vk::BufferUsageFlags::TRANSFER_DST)
+        .expect("buffer");
+    let wait = (job.timeline().raw(), job.submitted_value());
+    host.submit_after(Some(wait), |cmd| {
+        // SAFETY: recording; the buffer is live with TRANSFER_DST usage; the range is inside.
+        unsafe { host.device.cmd_fill_buffer(cmd, fill.raw, 0, 16, 5) };
+        Ok(())
+    })
+    .expect("a host submission waiting on the job's timeline");
+    assert!(job.timeline().value().expect("value") >= wait.1);
+    assert_eq!(host.read_buffer::<u32>(&fill), vec![5; 4]);
+    host.destroy_buffer(fill);
+    let uv = job.finish().expect("job result");
+    assert!(uv
+        .iter()
+        .zip(&blocking)
+        .all(|(a, b)| a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits()));
+    drop(engine);
+    assert_silent(
+        &host,
+        "a job on its own queue, a host waiting on its timeline",
+    );
+}
