@@ -519,9 +519,12 @@ struct ParamArgs {
     /// before any heavy work; 0 = no limit.
     #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
     max_faces: usize,
-    /// Gap between packed charts and to the border, as a fraction of the unit square's side.
-    #[arg(long, default_value_t = 0.005)]
-    margin: f64,
+    /// Texture side in texels the charts are packed for (atlas path).
+    #[arg(long, default_value_t = 1024)]
+    resolution: u32,
+    /// Empty texels between packed charts and to the texture's border.
+    #[arg(long, default_value_t = 2)]
+    padding: u32,
     /// How strongly seams prefer curved regions (0 = shortest seams).
     #[arg(long, default_value_t = 1.0)]
     seam_curvature: f64,
@@ -1092,13 +1095,11 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         CutArg::None => param::CutMode::Never,
         CutArg::Always => param::CutMode::Always,
     };
-    if !(args.margin.is_finite() && (0.0..0.2).contains(&args.margin)) {
-        return Err(foldfree::Error::Usage(format!(
-            "--margin {} is outside [0, 0.2)",
-            args.margin
-        )));
-    }
-    job.pack.margin = args.margin;
+    job.pack = foldfree::param::pack::PackOptions {
+        resolution: args.resolution,
+        padding: args.padding,
+    };
+    job.pack.validate()?;
     if !(args.seam_curvature.is_finite() && args.seam_curvature >= 0.0) {
         return Err(foldfree::Error::Usage(format!(
             "--seam-curvature {} must be a finite number >= 0",
@@ -1175,12 +1176,15 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     );
     if let Some(a) = &r.atlas {
         eprintln!(
-            "  cut: {} chart(s), {} seam edges (length {:.4}), {} vt; packing efficiency {:.1}%",
+            "  cut: {} chart(s), {} seam edges (length {:.4}), {} vt; packed at {}² with {} texels padding: efficiency {:.1}% of the area, {:.1}% of the texels",
             a.charts,
             a.seam_edges,
             a.seam_length,
             a.texture_coordinates,
-            100.0 * a.packing_efficiency
+            a.resolution,
+            a.padding,
+            100.0 * a.packing_efficiency,
+            100.0 * a.texel_coverage
         );
     }
     if let Some(t) = &r.kernel_times {

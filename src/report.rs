@@ -99,8 +99,15 @@ pub struct AtlasReport {
     pub components: usize,
     /// Σ chart UV area / area of the unit square.
     pub packing_efficiency: f64,
-    /// Gap between charts and to the border, as a fraction of the square's side.
-    pub margin: f64,
+    /// Texels some chart touches / all texels, at `resolution` (xatlas's "utilization").
+    pub texel_coverage: f64,
+    /// Texture side in texels, and the empty texels kept between charts and to the border.
+    pub resolution: u32,
+    pub padding: u32,
+    /// Texels per unit of 3D length.
+    pub texels_per_unit: f64,
+    /// Seconds spent packing.
+    pub seconds_pack: f64,
     /// Seams added to relieve stretched tips (`CutOptions::extra_seams`).
     pub extra_seams: usize,
     /// Charts split because their map's boundary overlapped itself

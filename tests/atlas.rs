@@ -179,32 +179,88 @@ fn check_atlas(input: &Path, dir: &TempDir, extra: &[&str], expect_charts: Optio
         report["atlas"]["texture_coordinates"].as_u64(),
         Some(obj.vt.len() as u64)
     );
-    let mut boxes = Vec::new();
     for g in &groups {
         assert_eq!(chart_topology(&obj, g), (1, 1), "chart is not a disk");
-        let mut lo = [f64::INFINITY; 2];
-        let mut hi = [f64::NEG_INFINITY; 2];
-        for &f in g {
-            for t in obj.f_vt[f].expect("vt") {
-                for k in 0..2 {
-                    lo[k] = lo[k].min(obj.vt[t][k]);
-                    hi[k] = hi[k].max(obj.vt[t][k]);
-                }
-            }
-        }
-        assert!(lo[0] >= 0.0 && lo[1] >= 0.0 && hi[0] <= 1.0 && hi[1] <= 1.0);
-        boxes.push((lo, hi));
     }
-    for i in 0..boxes.len() {
-        for j in 0..i {
-            let (a, b) = (boxes[i], boxes[j]);
-            let apart = a.1[0] < b.0[0] || b.1[0] < a.0[0] || a.1[1] < b.0[1] || b.1[1] < a.0[1];
-            assert!(apart, "charts {i} and {j} overlap: {a:?} {b:?}");
-        }
-    }
+    let resolution = report["atlas"]["resolution"].as_u64().expect("resolution") as usize;
+    let padding = report["atlas"]["padding"].as_u64().expect("padding") as usize;
+    check_texels(&obj, &groups, resolution, padding);
     let eff = report["atlas"]["packing_efficiency"].as_f64().expect("eff");
     assert!(eff > 0.05 && eff <= 1.0, "packing efficiency {eff}");
     report
+}
+
+/// Rasterizes every chart of the file at `n`² (a texel belongs to a chart when one of its
+/// triangles covers the texel's centre or crosses the texel's edges — tested independently of
+/// the packer: each triangle is sampled on a 4×4 grid per texel plus its own vertices and edge
+/// midpoints), and checks that the charts lie inside `[0, 1]²`, keep their orientation (no
+/// mirrored chart) and that no two charts' texels are within `padding` texels of each other.
+fn check_texels(obj: &objcheck::Obj, groups: &[Vec<usize>], n: usize, padding: usize) {
+    let mut owner = vec![usize::MAX; n * n];
+    let nf = n as f64;
+    let mut mark = |x: f64, y: f64, c: usize| {
+        let (i, j) = ((x * nf).floor() as usize, (y * nf).floor() as usize);
+        if i < n && j < n {
+            let o = &mut owner[j * n + i];
+            assert!(
+                *o == usize::MAX || *o == c,
+                "texel ({i}, {j}) holds charts {} and {c}",
+                *o
+            );
+            *o = c;
+        }
+    };
+    for (c, g) in groups.iter().enumerate() {
+        for &f in g {
+            let t = obj.f_vt[f].expect("vt").map(|k| obj.vt[k]);
+            for q in &t {
+                assert!(
+                    (0.0..=1.0).contains(&q[0]) && (0.0..=1.0).contains(&q[1]),
+                    "{q:?}"
+                );
+            }
+            let signed = (t[1][0] - t[0][0]) * (t[2][1] - t[0][1])
+                - (t[2][0] - t[0][0]) * (t[1][1] - t[0][1]);
+            assert!(signed > 0.0, "chart {c}: a face is mirrored or degenerate");
+            // Barycentric samples dense enough to hit every texel the triangle covers by more
+            // than a sliver (4 per texel along the longest edge).
+            let len = (0..3)
+                .map(|k| {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+                })
+                .fold(0.0, f64::max);
+            let steps = ((len * nf * 4.0).ceil() as usize).max(1);
+            for u in 0..=steps {
+                for v in 0..=steps - u {
+                    let (a, b) = (u as f64 / steps as f64, v as f64 / steps as f64);
+                    let w = 1.0 - a - b;
+                    mark(
+                        w * t[0][0] + a * t[1][0] + b * t[2][0],
+                        w * t[0][1] + a * t[1][1] + b * t[2][1],
+                        c,
+                    );
+                }
+            }
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let o = owner[j * n + i];
+            if o == usize::MAX {
+                continue;
+            }
+            for dj in j.saturating_sub(padding)..(j + padding + 1).min(n) {
+                for di in i.saturating_sub(padding)..(i + padding + 1).min(n) {
+                    let q = owner[dj * n + di];
+                    assert!(
+                        q == usize::MAX || q == o,
+                        "charts {o} and {q} are closer than {padding} texels at ({i}, {j})"
+                    );
+                }
+            }
+        }
+    }
 }
 
 /// Pairs of boundary segments of the file's UV layout that cross (sharing no vertex), by
@@ -343,8 +399,8 @@ fn several_components_are_packed_apart() {
         &[
             "--solver",
             "none",
-            "--margin",
-            "0.02",
+            "--padding",
+            "4",
             "--overlap-splits",
             "0",
         ],
@@ -369,7 +425,7 @@ fn disk_with_cut_always_is_packed_into_the_unit_square() {
         Some(1),
     );
     assert_eq!(r["atlas"]["seam_edges"], 0);
-    // A flat square maps to a square: the packing fills the unit square up to the margin.
+    // A flat square maps to a square: the packing fills the texture up to the padding.
     let eff = r["atlas"]["packing_efficiency"].as_f64().expect("eff");
     assert!(eff > 0.97, "{eff}");
 }

@@ -180,7 +180,9 @@ pub(crate) fn run_atlas(
             area_3d: fs.iter().map(|&f| frames.area[f as usize]).sum(),
         })
         .collect();
-    let packing = pack::pack(&mut uv, &refs, &job.pack);
+    let t_pack = Instant::now();
+    let packing = pack::pack(&mut uv, &refs, &job.pack)?;
+    let seconds_pack = t_pack.elapsed().as_secs_f64();
 
     let split_topo = Topology::build(&cutm.mesh, &job.input)?;
     let m = metrics::evaluate(
@@ -216,7 +218,11 @@ pub(crate) fn run_atlas(
         genus: topo.genus(),
         components: topo.components,
         packing_efficiency: packing.efficiency,
-        margin: job.pack.margin,
+        texel_coverage: packing.coverage,
+        resolution: job.pack.resolution,
+        padding: job.pack.padding,
+        texels_per_unit: packing.texels_per_unit,
+        seconds_pack,
         extra_seams: extra.len(),
         overlap_splits: splits.len(),
         seconds_cut,

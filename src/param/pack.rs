@@ -1,35 +1,74 @@
-//! Packing several charts into the unit square without overlap.
+//! Packing the charts of an atlas into one texture of `resolution`² texels.
 //!
-//! Every chart is first scaled so its UV area equals its 3D area (one texel density for the
-//! whole atlas: a texture looks equally sharp on every chart), then turned so its bounding box
-//! is the smallest over the directions of its convex hull's edges (the minimum-area enclosing
-//! rectangle has a side on the hull; Freeman & Shapira 1975), laid flat (width ≥ height), and
-//! the boxes are packed into shelves, tallest first (next-fit decreasing height). The strip
-//! width is chosen among candidates to make the result as square as possible, and the margin
-//! is kept between boxes and around the border, in the final `[0, 1]²` units. Boxes are disjoint,
-//! so charts are too (each chart lies inside its box).
+//! Every chart is scaled so its UV area equals its 3D area (one texel density for the whole
+//! atlas: a texture looks equally sharp on every chart) and turned so its bounding box is the
+//! smallest over the directions of its convex hull's edges (the minimum-area enclosing
+//! rectangle has a side on the hull; Freeman & Shapira 1975). Then, at a candidate scale
+//! (texels per unit), each chart is rasterized **conservatively** — every texel a triangle
+//! touches is the chart's — and placed, largest first, into an occupancy bitmap of the texture:
+//! at each of the four right-angle rotations (never mirrored: a rotation keeps every triangle's
+//! orientation), the first free position in row-major order where the chart's footprint grown
+//! by `padding` texels touches no other chart and stays inside the border, keeping the
+//! rotation whose footprint ends lowest (then leftmost). The scale is the largest one for which
+//! every chart fits, found by bisection; positions are whole texels, so a chart's final
+//! footprint is exactly the one placed. This is the packer xatlas and Blender use (bitmap
+//! occupancy, rotations, scale search); the bitmap rows are 64-bit words and a blocked
+//! position skips to the end of the blocking run.
+//!
+//! Two numbers say how full the result is, and they differ: the **efficiency** is Σ chart UV
+//! area / atlas area; the **texel coverage** is the share of texels some chart touches (what
+//! xatlas calls utilization), larger because edge texels count whole.
 #![forbid(unsafe_code)]
 
 /// Packing options.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PackOptions {
-    /// Gap between charts and to the square's border, as a fraction of the square's side.
-    pub margin: f64,
+    /// Texture side in texels.
+    pub resolution: u32,
+    /// Empty texels between charts and between a chart and the border.
+    pub padding: u32,
 }
 
 impl Default for PackOptions {
     fn default() -> Self {
-        PackOptions { margin: 0.005 }
+        PackOptions {
+            resolution: 1024,
+            padding: 2,
+        }
+    }
+}
+
+impl PackOptions {
+    /// Checks the ranges (`resolution` 16..=16384, `padding` below a quarter of it).
+    pub fn validate(&self) -> crate::Result<()> {
+        if !(16..=16384).contains(&self.resolution) {
+            return Err(crate::Error::Usage(format!(
+                "--resolution {} is outside 16..=16384",
+                self.resolution
+            )));
+        }
+        if self.padding >= self.resolution / 4 {
+            return Err(crate::Error::Usage(format!(
+                "--padding {} must be below a quarter of the resolution ({})",
+                self.padding, self.resolution
+            )));
+        }
+        Ok(())
     }
 }
 
 /// What [`pack`] did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Packing {
-    /// Σ chart UV area / area of the unit square, after packing.
+    /// Σ chart UV area / atlas area.
     pub efficiency: f64,
-    /// Lower-left corner and size of each chart's box in `[0, 1]²`.
-    pub boxes: Vec<[f64; 4]>,
+    /// Texels touched by some chart / all texels.
+    pub coverage: f64,
+    /// Texels per unit of 3D length.
+    pub texels_per_unit: f64,
+    /// Per chart: lower-left texel of its footprint and its orientation (0–3: quarter turns
+    /// of the minimum-area box; 4–7: of the smallest enclosing square, when they differ).
+    pub placements: Vec<([u32; 2], u8)>,
 }
 
 /// One chart to pack: its vertices (indices into the shared UV array), its faces (triangles
@@ -40,11 +79,19 @@ pub struct ChartRef<'a> {
     pub area_3d: f64,
 }
 
-/// Packs the charts of `uv` in place into `[0, 1]²`. Each vertex must belong to one chart.
-pub fn pack(uv: &mut [[f64; 2]], charts: &[ChartRef], opts: &PackOptions) -> Packing {
-    let margin = opts.margin.clamp(0.0, 0.2);
-    // Scale to 3D area, rotate to the minimal box, move the box's corner to the origin.
-    let mut sizes = Vec::with_capacity(charts.len());
+/// Packs the charts of `uv` in place into `[0, 1]²` (texel `(i, j)` covers
+/// `[i, i+1] × [j, j+1] / resolution`). Each vertex must belong to one chart. Fails when the
+/// charts cannot all get a footprint with their padding at this resolution (too many charts).
+pub fn pack(
+    uv: &mut [[f64; 2]],
+    charts: &[ChartRef],
+    opts: &PackOptions,
+) -> crate::Result<Packing> {
+    opts.validate()?;
+    // Scale to 3D area; the orientations each chart may be placed in: its minimum-area box
+    // and its smallest enclosing square (what bounds a large chart in a square texture), each
+    // at four right angles — rotations only, never a reflection.
+    let mut shapes: Vec<Vec<Vec<[f64; 2]>>> = Vec::with_capacity(charts.len());
     for c in charts {
         let a_uv: f64 = c
             .faces
@@ -64,98 +111,509 @@ pub fn pack(uv: &mut [[f64; 2]], charts: &[ChartRef], opts: &PackOptions) -> Pac
                 [p[0] * s, p[1] * s]
             })
             .collect();
-        let angle = min_box_angle(&pts);
-        let (sn, cs) = angle.sin_cos();
-        let mut rotated: Vec<[f64; 2]> = pts
-            .iter()
-            .map(|p| [cs * p[0] + sn * p[1], -sn * p[0] + cs * p[1]])
-            .collect();
-        let (mut lo, mut hi) = bounds(&rotated);
-        if hi[1] - lo[1] > hi[0] - lo[0] {
-            // Lay the box flat: shelves pack wide, low boxes best.
-            for p in rotated.iter_mut() {
-                *p = [p[1], -p[0]];
-            }
-            (lo, hi) = bounds(&rotated);
+        let hull = convex_hull(&pts);
+        let mut bases = vec![min_box_angle(&hull)];
+        let square = min_square_angle(&hull);
+        let quarter = std::f64::consts::FRAC_PI_2;
+        let apart = (square - bases[0]).rem_euclid(quarter);
+        if apart.min(quarter - apart) > 1e-6 {
+            bases.push(square);
         }
-        for (p, &v) in rotated.iter().zip(c.vertices) {
-            uv[v as usize] = [p[0] - lo[0], p[1] - lo[1]];
-        }
-        sizes.push([hi[0] - lo[0], hi[1] - lo[1]]);
-    }
-    let total_uv_area: f64 = charts.iter().map(|c| c.area_3d.max(0.0)).sum();
-
-    // Order: tallest first, ties by index (deterministic).
-    let mut order: Vec<usize> = (0..charts.len()).collect();
-    order.sort_by(|&a, &b| sizes[b][1].total_cmp(&sizes[a][1]).then(a.cmp(&b)));
-    let box_area: f64 = sizes.iter().map(|s| s[0] * s[1]).sum();
-    let widest = sizes.iter().map(|s| s[0]).fold(0.0, f64::max);
-
-    // The margin is relative to the final side, which grows with the gap: iterate the gap
-    // g ← margin·side(g) (a contraction while margin × the number of gaps across is < 1) until
-    // it covers the margin, slightly over-sized so the last round ends on the safe side.
-    let mut gap = margin * box_area.sqrt().max(widest);
-    let mut chosen: Option<(f64, Vec<[f64; 2]>)> = None;
-    for _ in 0..50 {
-        let mut best: Option<(f64, Vec<[f64; 2]>)> = None;
-        for k in 0..24 {
-            let width = (box_area.sqrt() * (0.7 + 0.05 * k as f64)).max(widest) + 2.0 * gap;
-            let (corners, w, h) = shelves(&sizes, &order, width, gap);
-            let s = w.max(h);
-            if best.as_ref().map_or(true, |b| s < b.0) {
-                best = Some((s, corners));
+        let mut orientations = Vec::with_capacity(4 * bases.len());
+        for angle in bases {
+            let rotated = rotate(&pts, angle);
+            for k in 0..4 {
+                orientations.push(quarter_turns(&rotated, k));
             }
         }
-        let Some((s, corners)) = best else { break };
-        let enough = gap >= margin * s;
-        gap = margin * s * 1.001;
-        chosen = Some((s, corners));
-        if enough {
-            break;
-        }
+        shapes.push(orientations);
     }
-    let Some((side, corners)) = chosen.filter(|c| c.0 > 0.0) else {
-        return Packing {
+    // Each chart's triangles in its local vertex numbering.
+    let tris: Vec<Vec<[usize; 3]>> = charts
+        .iter()
+        .map(|c| {
+            let index: std::collections::HashMap<u32, usize> = c
+                .vertices
+                .iter()
+                .enumerate()
+                .map(|(i, &v)| (v, i))
+                .collect();
+            c.faces
+                .iter()
+                .filter_map(|f| Some([*index.get(&f[0])?, *index.get(&f[1])?, *index.get(&f[2])?]))
+                .collect()
+        })
+        .collect();
+    let total_area: f64 = charts.iter().map(|c| c.area_3d.max(0.0)).sum();
+    let r = f64::from(opts.resolution);
+    // No scale beats 100 % efficiency, and each chart's smallest side over its orientations
+    // must fit inside the padding (less the texel its footprint can straddle at each end).
+    let room = r - 2.0 * f64::from(opts.padding) - 2.0;
+    let widest = shapes
+        .iter()
+        .map(|o| {
+            o.iter()
+                .map(|p| {
+                    let (_, hi) = bounds(p);
+                    hi[0].max(hi[1])
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max);
+    if charts.is_empty() || !(total_area > 0.0 && total_area.is_finite()) || room <= 0.0 {
+        return Ok(Packing {
             efficiency: 0.0,
-            boxes: Vec::new(),
-        };
-    };
-    let inv = 1.0 / side;
-    for (c, corner) in charts.iter().zip(&corners) {
-        for &v in c.vertices {
-            let p = uv[v as usize];
-            uv[v as usize] = [(p[0] + corner[0]) * inv, (p[1] + corner[1]) * inv];
+            coverage: 0.0,
+            texels_per_unit: 0.0,
+            placements: Vec::new(),
+        });
+    }
+    let bound = (r / total_area.sqrt()).min(if widest > 0.0 {
+        room / widest
+    } else {
+        f64::INFINITY
+    });
+    // The bound itself often fits (one dominant chart); otherwise step down until a packing
+    // exists, then bisect (in log) between it and the last failure, to 0.2 %.
+    let mut found: Option<(f64, Attempt)> = None;
+    let mut failed: Option<f64> = None;
+    let mut factor = 1.0;
+    for _ in 0..60 {
+        let s = bound * factor;
+        match attempt(&shapes, &tris, s, opts) {
+            Some(a) => {
+                found = Some((s, a));
+                break;
+            }
+            None => {
+                failed = Some(s);
+                factor = next_factor(factor);
+            }
         }
     }
-    Packing {
-        efficiency: total_uv_area * inv * inv,
-        boxes: corners
+    let Some((mut s_ok, mut a_ok)) = found else {
+        return Err(crate::Error::Usage(format!(
+            "{} charts do not fit a {}² texture with {} texels of padding; raise --resolution",
+            charts.len(),
+            opts.resolution,
+            opts.padding
+        )));
+    };
+    let mut hi = failed.unwrap_or(s_ok);
+    while hi / s_ok > 1.002 {
+        let mid = (s_ok * hi).sqrt();
+        match attempt(&shapes, &tris, mid, opts) {
+            Some(a) => {
+                s_ok = mid;
+                a_ok = a;
+            }
+            None => hi = mid,
+        }
+    }
+    // Final UVs: rotate the scaled footprint, move it to its texel, divide by the resolution.
+    for ((c, o), (at, which)) in charts.iter().zip(&shapes).zip(&a_ok.placements) {
+        let turned: Vec<[f64; 2]> = o[*which as usize]
             .iter()
-            .zip(&sizes)
-            .map(|(c, s)| [c[0] * inv, c[1] * inv, s[0] * inv, s[1] * inv])
-            .collect(),
+            .map(|p| [p[0] * s_ok, p[1] * s_ok])
+            .collect();
+        for (q, &v) in turned.iter().zip(c.vertices) {
+            uv[v as usize] = [
+                (q[0] + 0.5 + f64::from(at[0])) / r,
+                (q[1] + 0.5 + f64::from(at[1])) / r,
+            ];
+        }
+    }
+    Ok(Packing {
+        efficiency: total_area * s_ok * s_ok / (r * r),
+        coverage: a_ok.covered as f64 / (r * r),
+        texels_per_unit: s_ok,
+        placements: a_ok.placements,
+    })
+}
+
+/// A successful placement of every chart at one scale.
+struct Attempt {
+    placements: Vec<([u32; 2], u8)>,
+    covered: u64,
+}
+
+/// Places every chart at `scale` texels per unit, or `None` when one does not fit.
+fn attempt(
+    shapes: &[Vec<Vec<[f64; 2]>>],
+    tris: &[Vec<[usize; 3]>],
+    scale: f64,
+    opts: &PackOptions,
+) -> Option<Attempt> {
+    let n = opts.resolution as usize;
+    let pad = opts.padding as usize;
+    // Footprints of each orientation.
+    let masks: Vec<Vec<Mask>> = shapes
+        .iter()
+        .zip(tris)
+        .map(|(o, t)| {
+            o.iter()
+                .map(|pts| {
+                    let scaled: Vec<[f64; 2]> =
+                        pts.iter().map(|p| [p[0] * scale, p[1] * scale]).collect();
+                    Mask::rasterize(&scaled, t)
+                })
+                .collect()
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..shapes.len()).collect();
+    order.sort_by(|&a, &b| masks[b][0].count.cmp(&masks[a][0].count).then(a.cmp(&b)));
+    let mut atlas = Bitmap::new(n, n);
+    let mut placements = vec![([0u32; 2], 0u8); shapes.len()];
+    let mut covered = 0u64;
+    for &i in &order {
+        let mut chosen: Option<(usize, usize, u8)> = None;
+        for rot in 0..masks[i].len() as u8 {
+            let m = &masks[i][rot as usize];
+            let grown = m.grown(pad);
+            let top_limit = chosen.map(|(x, y, r)| (y + masks[i][r as usize].h, x));
+            if let Some((x, y)) = atlas.first_fit(&grown, top_limit.map(|t| t.0), m.h) {
+                let key = (y + m.h, x);
+                if top_limit.map_or(true, |t| key < t) {
+                    chosen = Some((x, y, rot));
+                }
+            }
+        }
+        let (x, y, rot) = chosen?;
+        let m = &masks[i][rot as usize];
+        // The grown footprint sits at (x, y); the chart's own is `pad` texels in.
+        atlas.set(m, x + pad, y + pad);
+        covered += m.count as u64;
+        placements[i] = ([(x + pad) as u32, (y + pad) as u32], rot);
+    }
+    Some(Attempt {
+        placements,
+        covered,
+    })
+}
+
+/// The scale ladder below the bound: 1, 0.99, 0.97, 0.93, 0.85, 0.7, then halving.
+fn next_factor(f: f64) -> f64 {
+    const LADDER: [f64; 6] = [1.0, 0.99, 0.97, 0.93, 0.85, 0.7];
+    match LADDER.iter().position(|&x| (x - f).abs() < 1e-12) {
+        Some(i) if i + 1 < LADDER.len() => LADDER[i + 1],
+        _ => f * 0.5,
     }
 }
 
-/// Next-fit decreasing-height shelves in a strip of `width`; returns each box's corner and the
-/// used width and height (gaps included).
-fn shelves(sizes: &[[f64; 2]], order: &[usize], width: f64, gap: f64) -> (Vec<[f64; 2]>, f64, f64) {
-    let mut corners = vec![[0.0; 2]; sizes.len()];
-    let (mut x, mut y, mut shelf_h) = (gap, gap, 0.0f64);
-    let mut used_w = 0.0f64;
-    for &i in order {
-        let [w, h] = sizes[i];
-        if x > gap && x + w + gap > width {
-            y += shelf_h + gap;
-            x = gap;
-            shelf_h = 0.0;
-        }
-        corners[i] = [x, y];
-        x += w + gap;
-        used_w = used_w.max(x);
-        shelf_h = shelf_h.max(h);
+/// `pts` rotated by −`angle`.
+fn rotate(pts: &[[f64; 2]], angle: f64) -> Vec<[f64; 2]> {
+    let (sn, cs) = angle.sin_cos();
+    pts.iter()
+        .map(|p| [cs * p[0] + sn * p[1], -sn * p[0] + cs * p[1]])
+        .collect()
+}
+
+/// The rotation angle (rotating by −angle) whose axis-aligned box has the smallest larger
+/// side: the chart's smallest enclosing square, searched on a 1° grid and refined by
+/// golden-section search around the best sample.
+fn min_square_angle(hull: &[[f64; 2]]) -> f64 {
+    if hull.len() < 3 {
+        return 0.0;
     }
-    (corners, used_w, y + shelf_h + gap)
+    let side = |t: f64| {
+        let (lo, hi) = bounds(&rotate(hull, t));
+        (hi[0] - lo[0]).max(hi[1] - lo[1])
+    };
+    let step = std::f64::consts::FRAC_PI_2 / 90.0;
+    let (mut best, mut best_side) = (0.0, f64::INFINITY);
+    for k in 0..90 {
+        let t = k as f64 * step;
+        let s = side(t);
+        if s < best_side {
+            (best, best_side) = (t, s);
+        }
+    }
+    let (mut a, mut b) = (best - step, best + step);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..30 {
+        let (c, d) = (b - g * (b - a), a + g * (b - a));
+        if side(c) < side(d) {
+            b = d;
+        } else {
+            a = c;
+        }
+    }
+    let t = 0.5 * (a + b);
+    if side(t) < best_side {
+        t
+    } else {
+        best
+    }
+}
+
+/// `pts` turned by `k` quarter turns counter-clockwise and moved back to the positive
+/// quadrant with its box at the origin (a rotation: orientation is kept).
+fn quarter_turns(pts: &[[f64; 2]], k: u8) -> Vec<[f64; 2]> {
+    let turned: Vec<[f64; 2]> = pts
+        .iter()
+        .map(|&[x, y]| match k % 4 {
+            0 => [x, y],
+            1 => [-y, x],
+            2 => [-x, -y],
+            _ => [y, -x],
+        })
+        .collect();
+    let (lo, _) = bounds(&turned);
+    turned
+        .iter()
+        .map(|p| [p[0] - lo[0], p[1] - lo[1]])
+        .collect()
+}
+
+/// Rows of bits, 64 per word.
+#[derive(Clone, Debug)]
+struct Bitmap {
+    w: usize,
+    h: usize,
+    words: usize,
+    bits: Vec<u64>,
+}
+
+impl Bitmap {
+    fn new(w: usize, h: usize) -> Bitmap {
+        let words = w.div_ceil(64).max(1);
+        Bitmap {
+            w,
+            h,
+            words,
+            bits: vec![0; words * h],
+        }
+    }
+
+    fn get(&self, x: usize, y: usize) -> bool {
+        self.bits[y * self.words + x / 64] >> (x % 64) & 1 == 1
+    }
+
+    /// Sets bits `x0..=x1` of row `y`.
+    fn set_run(&mut self, y: usize, x0: usize, x1: usize) {
+        let row = &mut self.bits[y * self.words..(y + 1) * self.words];
+        let (k0, k1) = (x0 / 64, x1 / 64);
+        for (k, word) in row.iter_mut().enumerate().take(k1 + 1).skip(k0) {
+            let lo = if k == k0 { x0 % 64 } else { 0 };
+            let hi = if k == k1 { x1 % 64 } else { 63 };
+            let mask = (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
+            *word |= mask;
+        }
+    }
+
+    fn put(&mut self, x: usize, y: usize) {
+        self.bits[y * self.words + x / 64] |= 1 << (x % 64);
+    }
+
+    /// Bits `x .. x + 64` of row `y` (zeros past the end).
+    fn window(&self, x: usize, y: usize) -> u64 {
+        let row = &self.bits[y * self.words..(y + 1) * self.words];
+        let (k, sh) = (x / 64, x % 64);
+        let lo = row.get(k).copied().unwrap_or(0) >> sh;
+        let hi = if sh == 0 {
+            0
+        } else {
+            row.get(k + 1).copied().unwrap_or(0) << (64 - sh)
+        };
+        lo | hi
+    }
+
+    /// Whether `m` placed with its origin at `(x, y)` hits a set bit; on a hit, the row of
+    /// the mask that hit.
+    /// Rows are tried from `hint` on (the row that hit last time: at the next position it
+    /// usually hits again).
+    fn hits(&self, m: &Mask, x: usize, y: usize, hint: usize) -> Option<usize> {
+        let hit = |r: usize| {
+            let row = &m.bits.bits[r * m.bits.words..(r + 1) * m.bits.words];
+            row.iter()
+                .enumerate()
+                .any(|(k, &word)| word != 0 && self.window(x + 64 * k, y + r) & word != 0)
+        };
+        let hint = hint.min(m.h.saturating_sub(1));
+        (hint..m.h).chain(0..hint).find(|&r| hit(r))
+    }
+
+    /// The first free texel of row `y` at or after `x` (`w` when none).
+    fn free_from(&self, mut x: usize, y: usize) -> usize {
+        while x < self.w {
+            let word = !self.window(x, y);
+            if word != 0 {
+                return (x + word.trailing_zeros() as usize).min(self.w);
+            }
+            x += 64;
+        }
+        self.w
+    }
+
+    /// The first position (row-major) where `m` fits inside the bitmap without hitting a set
+    /// bit. With `top_limit`, rows `y` with `y + h > top_limit` are not searched (`h`: the
+    /// height the caller ranks positions by).
+    fn first_fit(&self, m: &Mask, top_limit: Option<usize>, h: usize) -> Option<(usize, usize)> {
+        if m.w > self.w || m.h > self.h {
+            return None;
+        }
+        for y in 0..=self.h - m.h {
+            if top_limit.is_some_and(|t| y + h > t) {
+                return None;
+            }
+            let mut x = 0;
+            let mut hint = 0;
+            while x + m.w <= self.w {
+                match self.hits(m, x, y, hint) {
+                    None => return Some((x, y)),
+                    Some(r) => {
+                        // The row's first and last set texels must both land on free texels:
+                        // skip past the occupied runs under either.
+                        hint = r;
+                        let (first, last) = (m.first[r], m.last[r]);
+                        let a = self.free_from(x + first, y + r) - first;
+                        let b = self.free_from(x + last, y + r) - last;
+                        x = a.max(b).max(x + 1);
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// Sets the bits of `m` placed at `(x, y)`.
+    fn set(&mut self, m: &Mask, x: usize, y: usize) {
+        for r in 0..m.h {
+            for c in 0..m.w {
+                if m.bits.get(c, r) {
+                    self.put(x + c, y + r);
+                }
+            }
+        }
+    }
+}
+
+/// How far outside a texel a triangle still counts as touching it when rasterizing (in
+/// texels): final UVs are recomputed in floating point, and a footprint must contain every
+/// texel the written chart touches, whatever the rounding.
+const TOUCH_EPS: f64 = 1e-6;
+
+/// A chart's footprint: the texels its triangles touch, with its box at the origin.
+#[derive(Clone, Debug)]
+struct Mask {
+    w: usize,
+    h: usize,
+    bits: Bitmap,
+    /// Per row, the first and last set column (`w` and 0 when empty).
+    first: Vec<usize>,
+    last: Vec<usize>,
+    count: usize,
+}
+
+impl Mask {
+    /// Conservative rasterization: texel `(i, j)` = `[i, i+1] × [j, j+1]` is set when it
+    /// intersects a triangle (separating-axis test: the box's two axes, the triangle's three
+    /// edge normals; a degenerate triangle counts as its box).
+    fn rasterize(pts: &[[f64; 2]], tris: &[[usize; 3]]) -> Mask {
+        // Half a texel in from the box's corner: no vertex sits on the grid line the mask's
+        // first row and column start at (the final UVs are moved the same way).
+        let pts: Vec<[f64; 2]> = pts.iter().map(|p| [p[0] + 0.5, p[1] + 0.5]).collect();
+        let pts = &pts[..];
+        let (_, hi) = bounds(pts);
+        let w = (hi[0].ceil() as usize).max(1);
+        let h = (hi[1].ceil() as usize).max(1);
+        let mut bits = Bitmap::new(w, h);
+        for t in tris {
+            let p = t.map(|i| pts[i]);
+            let (lo, hi) = bounds(&p);
+            let y0 = ((lo[1] - TOUCH_EPS).floor().max(0.0) as usize).min(h - 1);
+            let y1 = ((hi[1] + TOUCH_EPS).floor().max(0.0) as usize).min(h - 1);
+            for j in y0..=y1 {
+                // The triangle clipped to the closed row [j, j+1] (grown by TOUCH_EPS) is convex
+                // and spans the row's height only where it lies, so a texel of the row touches
+                // it exactly when their x-ranges overlap.
+                let (b0, b1) = (j as f64 - TOUCH_EPS, j as f64 + 1.0 + TOUCH_EPS);
+                let (mut x_lo, mut x_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                for k in 0..3 {
+                    let (a, b) = (p[k], p[(k + 1) % 3]);
+                    if (b0..=b1).contains(&a[1]) {
+                        x_lo = x_lo.min(a[0]);
+                        x_hi = x_hi.max(a[0]);
+                    }
+                    for y in [b0, b1] {
+                        if (a[1] - y) * (b[1] - y) < 0.0 {
+                            let x = a[0] + (b[0] - a[0]) * (y - a[1]) / (b[1] - a[1]);
+                            x_lo = x_lo.min(x);
+                            x_hi = x_hi.max(x);
+                        }
+                    }
+                }
+                if x_lo > x_hi {
+                    continue;
+                }
+                let i0 = ((x_lo - TOUCH_EPS).ceil() - 1.0).max(0.0) as usize;
+                let i1 = ((x_hi + TOUCH_EPS).floor().max(0.0) as usize).min(w - 1);
+                if i0 <= i1 {
+                    bits.set_run(j, i0, i1);
+                }
+            }
+        }
+        Mask::from_bits(bits)
+    }
+
+    fn from_bits(bits: Bitmap) -> Mask {
+        let (w, h) = (bits.w, bits.h);
+        let first = (0..h)
+            .map(|r| (0..w).find(|&c| bits.get(c, r)).unwrap_or(w))
+            .collect();
+        let last = (0..h)
+            .map(|r| (0..w).rev().find(|&c| bits.get(c, r)).unwrap_or(0))
+            .collect();
+        let count = bits.bits.iter().map(|b| b.count_ones() as usize).sum();
+        Mask {
+            w,
+            h,
+            bits,
+            first,
+            last,
+            count,
+        }
+    }
+
+    /// The footprint grown by `pad` texels in every direction (a square neighbourhood), so a
+    /// grown footprint that touches no other chart keeps `pad` empty texels between them.
+    fn grown(&self, pad: usize) -> Mask {
+        let (w, h) = (self.w + 2 * pad, self.h + 2 * pad);
+        let mut bits = Bitmap::new(w, h);
+        let words = bits.words;
+        // Horizontal: each row ORed with itself shifted by 1..=2·pad texels (word carries);
+        // vertical: each grown row is the OR of 2·pad + 1 of those.
+        let mut wide = vec![0u64; words * self.h];
+        for r in 0..self.h {
+            let src = &self.bits.bits[r * self.bits.words..(r + 1) * self.bits.words];
+            let dst = &mut wide[r * words..(r + 1) * words];
+            for shift in 0..=2 * pad {
+                let (k, sh) = (shift / 64, shift % 64);
+                for (i, &word) in src.iter().enumerate() {
+                    if word == 0 {
+                        continue;
+                    }
+                    if let Some(d) = dst.get_mut(i + k) {
+                        *d |= word << sh;
+                    }
+                    if sh > 0 {
+                        if let Some(d) = dst.get_mut(i + k + 1) {
+                            *d |= word >> (64 - sh);
+                        }
+                    }
+                }
+            }
+        }
+        for r in 0..self.h {
+            for dy in 0..=2 * pad {
+                let (src, dst) = (r * words, (r + dy) * words);
+                for i in 0..words {
+                    bits.bits[dst + i] |= wide[src + i];
+                }
+            }
+        }
+        Mask::from_bits(bits)
+    }
 }
 
 fn bounds(pts: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
@@ -176,8 +634,7 @@ fn bounds(pts: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
 
 /// The rotation angle (rotating points by −angle) whose axis-aligned box has the least area,
 /// over the directions of the convex hull's edges.
-fn min_box_angle(pts: &[[f64; 2]]) -> f64 {
-    let hull = convex_hull(pts);
+fn min_box_angle(hull: &[[f64; 2]]) -> f64 {
     if hull.len() < 3 {
         return 0.0;
     }
@@ -189,7 +646,7 @@ fn min_box_angle(pts: &[[f64; 2]]) -> f64 {
         let (s, c) = t.sin_cos();
         let mut lo = [f64::INFINITY; 2];
         let mut hi = [f64::NEG_INFINITY; 2];
-        for p in &hull {
+        for p in hull {
             let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
             for k in 0..2 {
                 lo[k] = lo[k].min(q[k]);
@@ -240,15 +697,67 @@ fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
 mod tests {
     use super::*;
 
-    fn square(offset: u32, size: f64, angle: f64) -> (Vec<[f64; 2]>, Vec<[u32; 3]>) {
+    /// Whether the closed triangle `p` and the closed texel `[i, i+1] × [j, j+1]`, grown by
+    /// `eps` on every side, intersect.
+    fn triangle_touches_cell(p: &[[f64; 2]; 3], i: f64, j: f64, eps: f64) -> bool {
+        let (a0, a1, b0, b1) = (i - eps, i + 1.0 + eps, j - eps, j + 1.0 + eps);
+        let corners = [[a0, b0], [a1, b0], [a1, b1], [a0, b1]];
+        let (lo, hi) = bounds(p);
+        if hi[0] < a0 || lo[0] > a1 || hi[1] < b0 || lo[1] > b1 {
+            return false;
+        }
+        for k in 0..3 {
+            let a = p[k];
+            let b = p[(k + 1) % 3];
+            let c = p[(k + 2) % 3];
+            let n = [a[1] - b[1], b[0] - a[0]];
+            if n[0] == 0.0 && n[1] == 0.0 {
+                continue;
+            }
+            let side = |q: [f64; 2]| n[0] * (q[0] - a[0]) + n[1] * (q[1] - a[1]);
+            let inner = side(c);
+            if inner == 0.0 {
+                continue; // degenerate: the box test above decides
+            }
+            // The cell is entirely on the far side of this edge.
+            if corners.iter().all(|&q| side(q) * inner < 0.0) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The scanline rasterizer sets exactly the texels the separating-axis test says a
+    /// triangle touches (random triangles, grown by the same epsilon).
+    #[test]
+    fn scanline_raster_matches_the_separating_axis_test() {
+        let mut state = 0x9e3779b97f4a7c15u64;
+        let mut rnd = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..200 {
+            let p: Vec<[f64; 2]> = (0..3).map(|_| [rnd() * 12.0, rnd() * 9.0]).collect();
+            let m = Mask::rasterize(&p, &[[0, 1, 2]]);
+            let q: [[f64; 2]; 3] = [0, 1, 2].map(|k| [p[k][0] + 0.5, p[k][1] + 0.5]);
+            for j in 0..m.h {
+                for i in 0..m.w {
+                    assert_eq!(
+                        m.bits.get(i, j),
+                        triangle_touches_cell(&q, i as f64, j as f64, TOUCH_EPS),
+                        "texel ({i}, {j}) of {q:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    fn rect(offset: u32, w: f64, h: f64, angle: f64) -> (Vec<[f64; 2]>, Vec<[u32; 3]>) {
         let (s, c) = angle.sin_cos();
-        let pts = [
-            [0.0, 0.0],
-            [size, 0.0],
-            [size, size / 2.0],
-            [0.0, size / 2.0],
-        ]
-        .map(|p: [f64; 2]| [c * p[0] - s * p[1] + 5.0, s * p[0] + c * p[1] - 3.0]);
+        let pts = [[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]]
+            .map(|p: [f64; 2]| [c * p[0] - s * p[1] + 5.0, s * p[0] + c * p[1] - 3.0]);
         (
             pts.to_vec(),
             vec![
@@ -258,47 +767,110 @@ mod tests {
         )
     }
 
+    /// Charts packed at 256² with 2 texels padding: inside the square, counter-clockwise
+    /// still, and their conservative footprints (recomputed from the final UVs) 2 texels apart.
     #[test]
-    fn packed_charts_are_disjoint_and_inside() {
+    fn packed_charts_keep_their_padding_and_orientation() {
         let mut uv = Vec::new();
         let mut faces = Vec::new();
         let mut verts = Vec::new();
-        for i in 0..7u32 {
-            let (p, f) = square(4 * i, 1.0 + i as f64, 0.3 * i as f64);
+        for i in 0..9u32 {
+            let (p, f) = rect(4 * i, 1.0 + i as f64, 0.5 + 0.3 * i as f64, 0.3 * i as f64);
             uv.extend(p);
             faces.push(f);
             verts.push((4 * i..4 * i + 4).collect::<Vec<u32>>());
         }
-        let charts: Vec<ChartRef> = (0..7)
+        let charts: Vec<ChartRef> = (0..9)
             .map(|i| ChartRef {
                 vertices: &verts[i],
                 faces: &faces[i],
-                area_3d: (1.0 + i as f64).powi(2) / 2.0,
+                area_3d: (1.0 + i as f64) * (0.5 + 0.3 * i as f64),
             })
             .collect();
-        let p = pack(&mut uv, &charts, &PackOptions { margin: 0.01 });
-        for q in &uv {
-            assert!(q[0] >= 0.01 - 1e-12 && q[0] <= 1.0 - 0.01 + 1e-12, "{q:?}");
-            assert!(q[1] >= 0.01 - 1e-12 && q[1] <= 1.0 - 0.01 + 1e-12, "{q:?}");
-        }
-        for i in 0..7 {
-            for j in 0..i {
-                let (a, b) = (p.boxes[i], p.boxes[j]);
-                let apart = a[0] + a[2] + 0.01 - 1e-12 <= b[0]
-                    || b[0] + b[2] + 0.01 - 1e-12 <= a[0]
-                    || a[1] + a[3] + 0.01 - 1e-12 <= b[1]
-                    || b[1] + b[3] + 0.01 - 1e-12 <= a[1];
-                assert!(apart, "boxes {i} {j}: {a:?} {b:?}");
+        let opts = PackOptions {
+            resolution: 256,
+            padding: 2,
+        };
+        let p = pack(&mut uv, &charts, &opts).expect("packs");
+        let n = 256.0;
+        let mut owner = vec![usize::MAX; 256 * 256];
+        for (ci, fs) in faces.iter().enumerate() {
+            for f in fs {
+                let t = f.map(|v| [uv[v as usize][0] * n, uv[v as usize][1] * n]);
+                let signed = (t[1][0] - t[0][0]) * (t[2][1] - t[0][1])
+                    - (t[2][0] - t[0][0]) * (t[1][1] - t[0][1]);
+                assert!(signed > 0.0, "chart {ci} was mirrored");
+                for q in &t {
+                    assert!(q[0] >= 2.0 && q[0] <= n - 2.0 && q[1] >= 2.0 && q[1] <= n - 2.0);
+                }
+                for j in 0..256 {
+                    for i in 0..256 {
+                        if triangle_touches_cell(&t, i as f64, j as f64, 0.0) {
+                            let o = &mut owner[j * 256 + i];
+                            assert!(*o == usize::MAX || *o == ci, "texel ({i}, {j}) shared");
+                            *o = ci;
+                        }
+                    }
+                }
             }
         }
-        // Rectangles rotate to their own axes, so the boxes are tight.
-        let used: f64 = p.boxes.iter().map(|b| b[2] * b[3]).sum();
-        assert!(
-            (used - p.efficiency).abs() < 1e-9,
-            "{used} {}",
-            p.efficiency
-        );
-        assert!(p.efficiency > 0.5, "{}", p.efficiency);
+        for j in 0..256usize {
+            for i in 0..256usize {
+                let o = owner[j * 256 + i];
+                if o == usize::MAX {
+                    continue;
+                }
+                for dj in j.saturating_sub(2)..(j + 3).min(256) {
+                    for di in i.saturating_sub(2)..(i + 3).min(256) {
+                        let q = owner[dj * 256 + di];
+                        assert!(
+                            q == usize::MAX || q == o,
+                            "charts {o} and {q} closer than 2"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(p.efficiency > 0.6 && p.efficiency < p.coverage, "{p:?}");
+    }
+
+    /// A single square fills the texture up to its padding.
+    #[test]
+    fn one_square_fills_the_texture() {
+        let (mut uv, f) = rect(0, 1.0, 1.0, 0.2);
+        let verts = [0, 1, 2, 3];
+        let charts = [ChartRef {
+            vertices: &verts,
+            faces: &f,
+            area_3d: 1.0,
+        }];
+        let p = pack(&mut uv, &charts, &PackOptions::default()).expect("packs");
+        assert!(p.efficiency > 0.985, "{p:?}");
+    }
+
+    #[test]
+    fn too_many_charts_for_the_resolution_is_an_error() {
+        let mut uv = Vec::new();
+        let mut faces = Vec::new();
+        let mut verts = Vec::new();
+        for i in 0..200u32 {
+            let (p, f) = rect(4 * i, 1.0, 1.0, 0.0);
+            uv.extend(p);
+            faces.push(f);
+            verts.push((4 * i..4 * i + 4).collect::<Vec<u32>>());
+        }
+        let charts: Vec<ChartRef> = (0..200)
+            .map(|i| ChartRef {
+                vertices: &verts[i],
+                faces: &faces[i],
+                area_3d: 1.0,
+            })
+            .collect();
+        let opts = PackOptions {
+            resolution: 16,
+            padding: 2,
+        };
+        assert!(pack(&mut uv, &charts, &opts).is_err());
     }
 
     #[test]
