@@ -36,6 +36,20 @@ fn validated_host() -> Option<Host> {
     }
 }
 
+/// Whether two UVs are the same bit for bit.
+fn same_bits(a: &[f64; 2], b: &[f64; 2]) -> bool {
+    a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits()
+}
+
+/// An engine on the host's device and queue.
+fn engine_on(host: &Host) -> Engine {
+    // SAFETY: the handles come from `host`, which outlives the engine (every test drops the
+    // engine first); the device has `required_features()`; the tests use the queue only
+    // through the engine, its jobs' `poll`/`finish` on the test's thread, or between them.
+    let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("context");
+    Engine::new(ctx).expect("engine")
+}
+
 fn assert_silent(host: &Host, when: &str) {
     let messages = host.take_messages();
     assert!(
@@ -151,11 +165,7 @@ fn bad_targets_are_refused_without_touching_the_host_buffer() {
         .expect("host buffer");
     host.write_buffer(&buffer, &[0xABu8; 64]);
     {
-        // SAFETY: the handles come from `host`, which outlives the engine (dropped in this
-        // block); the device has `required_features()`; this thread does not use the queue
-        // while the engine runs.
-        let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("from_host");
-        let engine = Engine::new(ctx).expect("engine");
+        let engine = engine_on(&host);
         let uv = vec![[0.25, 0.5]; 4];
         let target = |offset, stride| UvTarget {
             // SAFETY: a live 64-byte storage buffer of the lent device, destroyed after the
@@ -204,11 +214,7 @@ fn a_lost_device_gives_typed_errors_not_panics() {
         .create_buffer(64, vk::BufferUsageFlags::STORAGE_BUFFER)
         .expect("host buffer");
     {
-        // SAFETY: the handles come from `host`, which outlives the engine (dropped in this
-        // block); the device has `required_features()`; this thread does not use the queue
-        // while the engine runs.
-        let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("from_host");
-        let engine = Engine::new(ctx).expect("engine");
+        let engine = engine_on(&host);
         let positions = [
             [0.0, 0.0, 0.0],
             [1.0, 0.0, 0.0],
@@ -309,11 +315,7 @@ fn mesh_from_host_buffers_matches_the_cpu_twin() {
     host.write_buffer(&vbuf, &vb);
     host.write_buffer(&ibuf, &ib);
     {
-        // SAFETY: the handles come from `host`, which outlives the engine (dropped in this
-        // block); the device has `required_features()`; this thread does not use the queue
-        // while the engine runs.
-        let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("from_host");
-        let engine = Engine::new(ctx).expect("engine");
+        let engine = engine_on(&host);
         // SAFETY: live storage buffers of the lent device, destroyed after the engine.
         let (fb, fv, fi) = unsafe {
             (
@@ -419,10 +421,7 @@ fn a_job_polled_to_completion_matches_the_blocking_call() {
         return;
     };
     let mesh = foldfree::mesh::read_obj(&host_renderer::default_mesh()).expect("mesh");
-    // SAFETY: the handles come from `host`, which outlives the engine; the device has
-    // `required_features()`; this thread uses the queue only through the engine and the job.
-    let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("context");
-    let engine = Engine::new(ctx).expect("engine");
+    let engine = engine_on(&host);
     let opts = EmbedOptions::default();
     let blocking = engine
         .parameterize(&mesh.positions, &mesh.faces, &opts)
@@ -453,10 +452,7 @@ fn a_job_polled_to_completion_matches_the_blocking_call() {
     let uv = job.finish().expect("job result");
     assert_eq!(uv.len(), blocking.len());
     for (i, (a, b)) in uv.iter().zip(&blocking).enumerate() {
-        assert!(
-            a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits(),
-            "vertex {i}: job {a:?} vs blocking {b:?}"
-        );
+        assert!(same_bits(a, b), "vertex {i}: job {a:?} vs blocking {b:?}");
     }
 
     // Slices far below one iteration's time: every iteration is split into kernel ranges,
@@ -480,10 +476,7 @@ fn a_job_polled_to_completion_matches_the_blocking_call() {
         "iterations were not split: {p:?}"
     );
     let uv = job.finish().expect("job result");
-    assert!(uv
-        .iter()
-        .zip(&blocking)
-        .all(|(a, b)| a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits()));
+    assert!(uv.iter().zip(&blocking).all(|(a, b)| same_bits(a, b)));
     drop(engine);
     assert_silent(&host, "running a job by poll()");
 }
@@ -577,12 +570,7 @@ fn a_job_on_its_own_queue_matches_and_the_host_can_wait_on_its_timeline() {
         return;
     };
     let mesh = foldfree::mesh::read_obj(&host_renderer::default_mesh()).expect("mesh");
-    // SAFETY: the handles come from `host`, which outlives the engine; the device has
-    // `required_features()`. While the `Own` job runs this thread leaves the queue to it; the
-    // `BetweenFrames` job submits only inside `poll`, on this thread, between the host's own
-    // submissions.
-    let ctx = unsafe { Context::from_host(host.host_desc()) }.expect("context");
-    let engine = Engine::new(ctx).expect("engine");
+    let engine = engine_on(&host);
     let mut opts = EmbedOptions::default();
     opts.admm.max_iters = 200;
     let blocking = engine
@@ -602,10 +590,7 @@ fn a_job_on_its_own_queue_matches_and_the_host_can_wait_on_its_timeline() {
         std::thread::sleep(std::time::Duration::from_millis(1));
     }
     let uv = job.finish().expect("job result");
-    assert!(uv
-        .iter()
-        .zip(&blocking)
-        .all(|(a, b)| a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits()));
+    assert!(uv.iter().zip(&blocking).all(|(a, b)| same_bits(a, b)));
 
     // The host's queue is the job's only while it runs (a real host would lend a dedicated
     // queue); now a BetweenFrames job, and a host submission that waits on its timeline.
@@ -633,10 +618,7 @@ fn a_job_on_its_own_queue_matches_and_the_host_can_wait_on_its_timeline() {
     assert_eq!(host.read_buffer::<u32>(&fill), vec![5; 4]);
     host.destroy_buffer(fill);
     let uv = job.finish().expect("job result");
-    assert!(uv
-        .iter()
-        .zip(&blocking)
-        .all(|(a, b)| a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits()));
+    assert!(uv.iter().zip(&blocking).all(|(a, b)| same_bits(a, b)));
     drop(engine);
     assert_silent(
         &host,

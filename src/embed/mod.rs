@@ -80,7 +80,7 @@ pub mod job;
 pub use job::{Job, JobOptions, JobPhase, JobProgress, JobQueue};
 
 use crate::gpu::interop::{ForeignDispatch, ForeignRange, ForeignSet, SetEntry, TargetUse};
-use crate::gpu::{shaders, vk, Buffer, ComputePipeline, ComputePipelineDesc, Context};
+use crate::gpu::{shaders, vk, Buffer, ComputePipeline, Context};
 use crate::init::InitMethod;
 use crate::mesh::{self, TriMesh};
 use crate::param::admm::AdmmOptions;
@@ -324,25 +324,17 @@ impl Engine {
     /// An engine on `ctx`, normally made by `unsafe { Context::from_host(..) }`. Builds the UV
     /// scatter pipeline (under a millisecond).
     pub fn new(ctx: Context) -> Result<Engine> {
-        let spirv = shaders::words(shaders::EMBED_SCATTER_UV)?;
-        let scatter = ComputePipeline::new(
+        let scatter = ComputePipeline::from_shader::<ScatterPush>(
             &ctx,
-            &ComputePipelineDesc::new(
-                "embed.scatter_uv",
-                &spirv,
-                2,
-                std::mem::size_of::<ScatterPush>() as u32,
-            ),
+            "embed.scatter_uv",
+            shaders::EMBED_SCATTER_UV,
+            2,
         )?;
-        let spirv = shaders::words(shaders::EMBED_GATHER_WORDS)?;
-        let gather = ComputePipeline::new(
+        let gather = ComputePipeline::from_shader::<GatherPush>(
             &ctx,
-            &ComputePipelineDesc::new(
-                "embed.gather_words",
-                &spirv,
-                2,
-                std::mem::size_of::<GatherPush>() as u32,
-            ),
+            "embed.gather_words",
+            shaders::EMBED_GATHER_WORDS,
+            2,
         )?;
         Ok(Engine {
             ctx,
