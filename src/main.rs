@@ -525,6 +525,10 @@ struct ParamArgs {
     /// Empty texels between packed charts and to the texture's border.
     #[arg(long, default_value_t = 2)]
     padding: u32,
+    /// Texels per unit of 3D length instead of a fixed resolution: the texture is the smallest
+    /// square (a multiple of 4 texels) that holds the charts at this density.
+    #[arg(long, conflicts_with = "resolution")]
+    texel_density: Option<f64>,
     /// How strongly seams prefer curved regions (0 = shortest seams).
     #[arg(long, default_value_t = 1.0)]
     seam_curvature: f64,
@@ -1098,6 +1102,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     job.pack = foldfree::param::pack::PackOptions {
         resolution: args.resolution,
         padding: args.padding,
+        texels_per_unit: args.texel_density,
     };
     job.pack.validate()?;
     if !(args.seam_curvature.is_finite() && args.seam_curvature >= 0.0) {

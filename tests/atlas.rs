@@ -494,3 +494,21 @@ fn shared_meshes_sweep() {
         }
     }
 }
+
+/// `--texel-density`: the scale is the one asked for, the texture the smallest square that
+/// holds the atlas (a multiple of 4), and the layout passes the texel check at that size.
+#[test]
+fn texel_density_sets_the_scale_and_finds_the_resolution() {
+    let dir = TempDir::new("atlas_density");
+    let r = check_atlas(
+        &data("bunny_npm"),
+        &dir,
+        &["--texel-density", "150", "--padding", "3"],
+        None,
+    );
+    let a = &r["atlas"];
+    assert_eq!(a["texels_per_unit"].as_f64(), Some(150.0));
+    assert_eq!(a["padding"].as_u64(), Some(3));
+    let res = a["resolution"].as_u64().expect("resolution");
+    assert!(res % 4 == 0 && (16..1024).contains(&res), "{res}");
+}

@@ -219,7 +219,7 @@ pub(crate) fn run_atlas(
         components: topo.components,
         packing_efficiency: packing.efficiency,
         texel_coverage: packing.coverage,
-        resolution: job.pack.resolution,
+        resolution: packing.resolution,
         padding: job.pack.padding,
         texels_per_unit: packing.texels_per_unit,
         seconds_pack,

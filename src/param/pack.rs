@@ -21,12 +21,15 @@
 #![forbid(unsafe_code)]
 
 /// Packing options.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PackOptions {
     /// Texture side in texels.
     pub resolution: u32,
     /// Empty texels between charts and between a chart and the border.
     pub padding: u32,
+    /// Texels per unit of 3D length: when set, the scale is this and the resolution is the
+    /// smallest square (a multiple of 4) that holds the charts, instead of the reverse.
+    pub texels_per_unit: Option<f64>,
 }
 
 impl Default for PackOptions {
@@ -34,6 +37,7 @@ impl Default for PackOptions {
         PackOptions {
             resolution: 1024,
             padding: 2,
+            texels_per_unit: None,
         }
     }
 }
@@ -46,6 +50,13 @@ impl PackOptions {
                 "--resolution {} is outside 16..=16384",
                 self.resolution
             )));
+        }
+        if let Some(d) = self.texels_per_unit {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(crate::Error::Usage(format!(
+                    "--texel-density {d} must be a positive number"
+                )));
+            }
         }
         if self.padding >= self.resolution / 4 {
             return Err(crate::Error::Usage(format!(
@@ -66,6 +77,8 @@ pub struct Packing {
     pub coverage: f64,
     /// Texels per unit of 3D length.
     pub texels_per_unit: f64,
+    /// Texture side in texels (the requested one, or the one found for a texel density).
+    pub resolution: u32,
     /// Per chart: lower-left texel of its footprint and its orientation (0–3: quarter turns
     /// of the minimum-area box; 4–7: of the smallest enclosing square, when they differ).
     pub placements: Vec<([u32; 2], u8)>,
@@ -145,71 +158,26 @@ pub fn pack(
         })
         .collect();
     let total_area: f64 = charts.iter().map(|c| c.area_3d.max(0.0)).sum();
-    let r = f64::from(opts.resolution);
-    // No scale beats 100 % efficiency, and each chart's smallest side over its orientations
-    // must fit inside the padding (less the texel its footprint can straddle at each end).
-    let room = r - 2.0 * f64::from(opts.padding) - 2.0;
-    let widest = shapes
-        .iter()
-        .map(|o| {
-            o.iter()
-                .map(|p| {
-                    let (_, hi) = bounds(p);
-                    hi[0].max(hi[1])
-                })
-                .fold(f64::INFINITY, f64::min)
-        })
-        .fold(0.0, f64::max);
-    if charts.is_empty() || !(total_area > 0.0 && total_area.is_finite()) || room <= 0.0 {
+    if charts.is_empty() || !(total_area > 0.0 && total_area.is_finite()) {
         return Ok(Packing {
             efficiency: 0.0,
             coverage: 0.0,
             texels_per_unit: 0.0,
+            resolution: opts.resolution,
             placements: Vec::new(),
         });
     }
-    let bound = (r / total_area.sqrt()).min(if widest > 0.0 {
-        room / widest
-    } else {
-        f64::INFINITY
-    });
-    // The bound itself often fits (one dominant chart); otherwise step down until a packing
-    // exists, then bisect (in log) between it and the last failure, to 0.2 %.
-    let mut found: Option<(f64, Attempt)> = None;
-    let mut failed: Option<f64> = None;
-    let mut factor = 1.0;
-    for _ in 0..60 {
-        let s = bound * factor;
-        match attempt(&shapes, &tris, s, opts) {
-            Some(a) => {
-                found = Some((s, a));
-                break;
-            }
-            None => {
-                failed = Some(s);
-                factor = next_factor(factor);
-            }
+    let (resolution, s_ok, a_ok) = match opts.texels_per_unit {
+        None => {
+            let (s, a) = search_scale(&shapes, &tris, total_area, opts)?;
+            (opts.resolution, s, a)
         }
-    }
-    let Some((mut s_ok, mut a_ok)) = found else {
-        return Err(crate::Error::Usage(format!(
-            "{} charts do not fit a {}² texture with {} texels of padding; raise --resolution",
-            charts.len(),
-            opts.resolution,
-            opts.padding
-        )));
+        Some(density) => {
+            let (res, a) = search_resolution(&shapes, &tris, total_area, density, opts)?;
+            (res, density, a)
+        }
     };
-    let mut hi = failed.unwrap_or(s_ok);
-    while hi / s_ok > 1.002 {
-        let mid = (s_ok * hi).sqrt();
-        match attempt(&shapes, &tris, mid, opts) {
-            Some(a) => {
-                s_ok = mid;
-                a_ok = a;
-            }
-            None => hi = mid,
-        }
-    }
+    let r = f64::from(resolution);
     // Final UVs: rotate the scaled footprint, move it to its texel, divide by the resolution.
     for ((c, o), (at, which)) in charts.iter().zip(&shapes).zip(&a_ok.placements) {
         let turned: Vec<[f64; 2]> = o[*which as usize]
@@ -227,8 +195,132 @@ pub fn pack(
         efficiency: total_area * s_ok * s_ok / (r * r),
         coverage: a_ok.covered as f64 / (r * r),
         texels_per_unit: s_ok,
+        resolution,
         placements: a_ok.placements,
     })
+}
+
+/// The largest scale (texels per unit) at which every chart fits `opts.resolution`².
+fn search_scale(
+    shapes: &[Vec<Vec<[f64; 2]>>],
+    tris: &[Vec<[usize; 3]>],
+    total_area: f64,
+    opts: &PackOptions,
+) -> crate::Result<(f64, Attempt)> {
+    let r = f64::from(opts.resolution);
+    // No scale beats 100 % efficiency, and each chart's smallest side over its orientations
+    // must fit inside the padding (less the texel its footprint can straddle at each end).
+    let room = r - 2.0 * f64::from(opts.padding) - 2.0;
+    let widest = shapes
+        .iter()
+        .map(|o| {
+            o.iter()
+                .map(|p| {
+                    let (_, hi) = bounds(p);
+                    hi[0].max(hi[1])
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max);
+    let bound = (r / total_area.sqrt()).min(if widest > 0.0 && room > 0.0 {
+        room / widest
+    } else {
+        f64::INFINITY
+    });
+    // The bound itself often fits (one dominant chart); otherwise step down until a packing
+    // exists, then bisect (in log) between it and the last failure, to 0.2 %.
+    let mut found: Option<(f64, Attempt)> = None;
+    let mut failed: Option<f64> = None;
+    let mut factor = 1.0;
+    for _ in 0..60 {
+        let s = bound * factor;
+        match attempt(shapes, tris, s, opts) {
+            Some(a) => {
+                found = Some((s, a));
+                break;
+            }
+            None => {
+                failed = Some(s);
+                factor = next_factor(factor);
+            }
+        }
+    }
+    let Some((mut s_ok, mut a_ok)) = found else {
+        return Err(crate::Error::Usage(format!(
+            "{} charts do not fit a {}² texture with {} texels of padding; raise --resolution",
+            shapes.len(),
+            opts.resolution,
+            opts.padding
+        )));
+    };
+    let mut hi = failed.unwrap_or(s_ok);
+    while hi / s_ok > 1.002 {
+        let mid = (s_ok * hi).sqrt();
+        match attempt(shapes, tris, mid, opts) {
+            Some(a) => {
+                s_ok = mid;
+                a_ok = a;
+            }
+            None => hi = mid,
+        }
+    }
+    Ok((s_ok, a_ok))
+}
+
+/// The smallest square texture (a multiple of 4 texels, at most 16384) holding every chart at
+/// `density` texels per unit: from the area bound, doubling until it fits, then bisection.
+fn search_resolution(
+    shapes: &[Vec<Vec<[f64; 2]>>],
+    tris: &[Vec<[usize; 3]>],
+    total_area: f64,
+    density: f64,
+    opts: &PackOptions,
+) -> crate::Result<(u32, Attempt)> {
+    const MAX: u32 = 16384;
+    let at = |res: u32| {
+        attempt(
+            shapes,
+            tris,
+            density,
+            &PackOptions {
+                resolution: res,
+                ..*opts
+            },
+        )
+    };
+    let round4 = |x: f64| ((x / 4.0).ceil() as u32).saturating_mul(4);
+    let mut lo = round4((total_area.sqrt() * density).max(16.0)).min(MAX);
+    let mut found = None;
+    let mut hi = lo;
+    loop {
+        if let Some(a) = at(hi) {
+            found = Some(a);
+            break;
+        }
+        if hi >= MAX {
+            break;
+        }
+        lo = hi;
+        hi = (hi * 2).min(MAX);
+    }
+    let Some(mut a_ok) = found else {
+        return Err(crate::Error::Usage(format!(
+            "at {density} texels per unit the charts need more than {MAX}² texels; lower \
+             --texel-density"
+        )));
+    };
+    // `lo` failed (or is the area bound), `hi` fits.
+    while hi - lo > 4 {
+        let mid = lo + ((hi - lo) / 8) * 4;
+        match at(mid) {
+            Some(a) => {
+                hi = mid;
+                a_ok = a;
+            }
+            None => lo = mid,
+        }
+    }
+    Ok((hi, a_ok))
 }
 
 /// A successful placement of every chart at one scale.
@@ -790,6 +882,7 @@ mod tests {
         let opts = PackOptions {
             resolution: 256,
             padding: 2,
+            texels_per_unit: None,
         };
         let p = pack(&mut uv, &charts, &opts).expect("packs");
         let n = 256.0;
@@ -848,6 +941,33 @@ mod tests {
         assert!(p.efficiency > 0.985, "{p:?}");
     }
 
+    /// With a texel density the scale is fixed and the texture is the smallest that holds
+    /// the chart: a unit square at 100 texels per unit needs 100 texels, its padding and the
+    /// texel its footprint straddles — 108 rounded to a multiple of 4.
+    #[test]
+    fn a_texel_density_picks_the_smallest_texture() {
+        let (mut uv, f) = rect(0, 1.0, 1.0, 0.0);
+        let verts = [0, 1, 2, 3];
+        let charts = [ChartRef {
+            vertices: &verts,
+            faces: &f,
+            area_3d: 1.0,
+        }];
+        let opts = PackOptions {
+            texels_per_unit: Some(100.0),
+            ..PackOptions::default()
+        };
+        let p = pack(&mut uv, &charts, &opts).expect("packs");
+        assert_eq!(p.texels_per_unit, 100.0);
+        assert!((104..=108).contains(&p.resolution), "{p:?}");
+        let side = uv.iter().map(|q| q[0]).fold(0.0, f64::max)
+            - uv.iter().map(|q| q[0]).fold(1.0, f64::min);
+        assert!(
+            (side * f64::from(p.resolution) - 100.0).abs() < 1e-9,
+            "{side}"
+        );
+    }
+
     #[test]
     fn too_many_charts_for_the_resolution_is_an_error() {
         let mut uv = Vec::new();
@@ -869,6 +989,7 @@ mod tests {
         let opts = PackOptions {
             resolution: 16,
             padding: 2,
+            texels_per_unit: None,
         };
         assert!(pack(&mut uv, &charts, &opts).is_err());
     }
