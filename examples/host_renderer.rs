@@ -667,24 +667,51 @@ impl Frame {
         Ok(frame)
     }
 
-    fn record(&self, host: &Host, size: u32) -> BoxResult<()> {
-        let d = &host.device;
-        let range = vk::ImageSubresourceRange::default()
-            .aspect_mask(vk::ImageAspectFlags::COLOR)
-            .level_count(1)
-            .layer_count(1);
-        // SAFETY: a fresh command buffer in the initial state.
-        unsafe { d.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default()) }?;
-        // Last frame's copy (and host read) → this frame's clear; contents discarded.
-        let to_clear = vk::ImageMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_READ)
-            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .old_layout(vk::ImageLayout::UNDEFINED)
-            .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+    /// The whole read-back buffer, from `src` to `dst` accesses.
+    fn readback_barrier(
+        &self,
+        src: vk::AccessFlags,
+        dst: vk::AccessFlags,
+    ) -> vk::BufferMemoryBarrier<'static> {
+        vk::BufferMemoryBarrier::default()
+            .src_access_mask(src)
+            .dst_access_mask(dst)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .buffer(self.readback.raw)
+            .size(vk::WHOLE_SIZE)
+    }
+
+    /// The whole image, from `(access, layout)` to `(access, layout)`.
+    fn image_barrier(
+        &self,
+        from: (vk::AccessFlags, vk::ImageLayout),
+        to: (vk::AccessFlags, vk::ImageLayout),
+    ) -> vk::ImageMemoryBarrier<'static> {
+        vk::ImageMemoryBarrier::default()
+            .src_access_mask(from.0)
+            .dst_access_mask(to.0)
+            .old_layout(from.1)
+            .new_layout(to.1)
             .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
             .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
             .image(self.image)
-            .subresource_range(range);
+            .subresource_range(COLOR_RANGE)
+    }
+
+    fn record(&self, host: &Host, size: u32) -> BoxResult<()> {
+        let d = &host.device;
+        let range = COLOR_RANGE;
+        // SAFETY: a fresh command buffer in the initial state.
+        unsafe { d.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default()) }?;
+        // Last frame's copy (and host read) → this frame's clear; contents discarded.
+        let to_clear = self.image_barrier(
+            (vk::AccessFlags::TRANSFER_READ, vk::ImageLayout::UNDEFINED),
+            (
+                vk::AccessFlags::TRANSFER_WRITE,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            ),
+        );
         // SAFETY: recording; the image is live.
         unsafe {
             d.cmd_pipeline_barrier(
@@ -710,23 +737,19 @@ impl Frame {
                 &[range],
             )
         };
-        let to_copy = vk::ImageMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
-            .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-            .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(self.image)
-            .subresource_range(range);
+        let to_copy = self.image_barrier(
+            (
+                vk::AccessFlags::TRANSFER_WRITE,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            ),
+            (
+                vk::AccessFlags::TRANSFER_READ,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            ),
+        );
         // Last frame's host read of the read-back buffer → this frame's copy into it.
-        let buffer_reuse = vk::BufferMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::HOST_READ)
-            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .buffer(self.readback.raw)
-            .size(vk::WHOLE_SIZE);
+        let buffer_reuse =
+            self.readback_barrier(vk::AccessFlags::HOST_READ, vk::AccessFlags::TRANSFER_WRITE);
         // SAFETY: recording; image and buffer are live.
         unsafe {
             d.cmd_pipeline_barrier(
@@ -760,13 +783,8 @@ impl Frame {
                 &[region],
             )
         };
-        let to_host = vk::BufferMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .buffer(self.readback.raw)
-            .size(vk::WHOLE_SIZE);
+        let to_host =
+            self.readback_barrier(vk::AccessFlags::TRANSFER_WRITE, vk::AccessFlags::HOST_READ);
         // SAFETY: recording; the buffer is live.
         unsafe {
             d.cmd_pipeline_barrier(
@@ -816,6 +834,15 @@ impl Frame {
         host.destroy_buffer(self.readback);
     }
 }
+
+/// The offscreen image's one mip level and layer.
+const COLOR_RANGE: vk::ImageSubresourceRange = vk::ImageSubresourceRange {
+    aspect_mask: vk::ImageAspectFlags::COLOR,
+    base_mip_level: 0,
+    level_count: 1,
+    base_array_layer: 0,
+    layer_count: 1,
+};
 
 /// Frame times of the host's loop, without and with a parameterization job on its queue.
 pub struct FrameLoop {

@@ -124,7 +124,8 @@ pub struct JobProgress {
 /// What the worker reports besides the counters.
 #[derive(Default)]
 struct Status {
-    phase: JobPhase,
+    /// The global solver has started (the other phases follow from the counters).
+    global: bool,
     primal: Option<f64>,
     energy: Option<f64>,
     global_iterations: usize,
@@ -239,7 +240,6 @@ fn run(
     let set = |f: &mut dyn FnMut(&mut Status)| {
         f(&mut status.lock().unwrap_or_else(PoisonError::into_inner))
     };
-    set(&mut |s| s.phase = JobPhase::Iterating);
     let map = crate::param::compute_map(
         &unit,
         &topo,
@@ -253,7 +253,7 @@ fn run(
                 s.energy = Some(h.energy);
             }),
             Progress::Global(it) => set(&mut |s| {
-                s.phase = JobPhase::Global;
+                s.global = true;
                 s.global_iterations = it.iteration;
                 s.energy = Some(it.energy);
             }),
@@ -293,8 +293,12 @@ impl Job {
         JobProgress {
             phase: if self.result.is_some() {
                 JobPhase::Done
+            } else if s.global {
+                JobPhase::Global
+            } else if self.stats.slices.load(Ordering::Relaxed) > 0 {
+                JobPhase::Iterating
             } else {
-                s.phase
+                JobPhase::Preparing
             },
             iterations: self.stats.iterations.load(Ordering::Relaxed),
             max_iterations: self.max_iterations,

@@ -300,11 +300,20 @@ impl Topology {
     }
 }
 
-/// Vertex → faces CSR: count, prefix sum, fill in face order (so each list is ascending).
+/// Vertex → faces CSR: [`corner_incidence`] with corners mapped to their face.
 fn vertex_faces(n: usize, faces: &[[u32; 3]]) -> (Vec<u32>, Vec<u32>) {
+    let (offsets, mut list) = corner_incidence(n, faces);
+    list.iter_mut().for_each(|c| *c /= 3);
+    (offsets, list)
+}
+
+/// Vertex → corner CSR of cells with `K` vertices (triangles, tets): the corners `K·cell + k`
+/// at vertex `v` are `list[offsets[v]..offsets[v + 1]]`, in cell order (count, prefix sum,
+/// fill). `n` is the vertex count; every index must be below it.
+pub fn corner_incidence<const K: usize>(n: usize, cells: &[[u32; K]]) -> (Vec<u32>, Vec<u32>) {
     let mut offsets = vec![0u32; n + 1];
-    for f in faces {
-        for &v in f {
+    for c in cells {
+        for &v in c {
             offsets[v as usize + 1] += 1;
         }
     }
@@ -312,10 +321,10 @@ fn vertex_faces(n: usize, faces: &[[u32; 3]]) -> (Vec<u32>, Vec<u32>) {
         offsets[v + 1] += offsets[v];
     }
     let mut cursor: Vec<u32> = offsets[..n].to_vec();
-    let mut list = vec![0u32; 3 * faces.len()];
-    for (fi, f) in faces.iter().enumerate() {
-        for &v in f {
-            list[cursor[v as usize] as usize] = fi as u32;
+    let mut list = vec![0u32; K * cells.len()];
+    for (ci, c) in cells.iter().enumerate() {
+        for (k, &v) in c.iter().enumerate() {
+            list[cursor[v as usize] as usize] = (K * ci + k) as u32;
             cursor[v as usize] += 1;
         }
     }

@@ -93,6 +93,8 @@ pub struct VulkanExecutor {
     recorder: Recorder,
     profile: Option<(TimestampPool, KernelTimes)>,
     slices: Option<Slices>,
+    /// Upload and download the iterate through staging copies even where it is mapped.
+    staged: bool,
 }
 
 fn not_sliced() -> GpuError {
@@ -323,6 +325,7 @@ impl VulkanExecutor {
             recorder,
             profile,
             slices,
+            staged: false,
         };
         let zeros = vec![[0f32; 4]; nf];
         exec.put(&a_prev, &zeros)?;
@@ -392,7 +395,7 @@ impl VulkanExecutor {
         if data.is_empty() {
             return Ok(());
         }
-        if buf.is_host_visible() {
+        if buf.is_host_visible() && !self.staged {
             return buf.write(data);
         }
         let bytes = std::mem::size_of_val(data) as u64;
@@ -419,7 +422,7 @@ impl VulkanExecutor {
         if n == 0 {
             return Ok(Vec::new());
         }
-        if buf.is_host_visible() {
+        if buf.is_host_visible() && !self.staged {
             let mut all: Vec<T> = buf.read()?;
             all.truncate(n);
             return Ok(all);
@@ -468,6 +471,15 @@ impl VulkanExecutor {
             },
         }
         .min(remaining)
+    }
+
+    /// Makes [`Executor::upload`] and [`Executor::download`] go through staging buffers and
+    /// copies in submissions of the executor's own (slices, when sliced) even where the
+    /// buffers are host visible: the path of a discrete GPU's device-local memory, exercised
+    /// and checked on devices (lavapipe) whose memory is all mapped.
+    pub fn with_staged_transfers(mut self) -> VulkanExecutor {
+        self.staged = true;
+        self
     }
 
     /// Device time per kernel accumulated over the profiled iterations.

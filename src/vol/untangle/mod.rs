@@ -157,7 +157,7 @@ struct Problem<'a> {
     fixed: &'a [bool],
     theta: f64,
     /// Incident slots 4·t + c of each vertex: `inc[start[v]..start[v + 1]]`.
-    start: Vec<usize>,
+    start: Vec<u32>,
     inc: Vec<u32>,
 }
 
@@ -177,24 +177,7 @@ impl<'a> Problem<'a> {
         fixed: &'a [bool],
         theta: f64,
     ) -> Self {
-        let nv = fixed.len();
-        let mut start = vec![0usize; nv + 1];
-        for t in tets {
-            for &v in t {
-                start[v as usize + 1] += 1;
-            }
-        }
-        for v in 0..nv {
-            start[v + 1] += start[v];
-        }
-        let mut fill = start.clone();
-        let mut inc = vec![0u32; 4 * tets.len()];
-        for (t, tet) in tets.iter().enumerate() {
-            for (c, &v) in tet.iter().enumerate() {
-                inc[fill[v as usize]] = (4 * t + c) as u32;
-                fill[v as usize] += 1;
-            }
-        }
+        let (start, inc) = crate::mesh::topology::corner_incidence(fixed.len(), tets);
         Problem {
             tets,
             d,
@@ -254,7 +237,7 @@ impl<'a> Problem<'a> {
             if self.fixed[v] {
                 return;
             }
-            for &slot in &self.inc[self.start[v]..self.start[v + 1]] {
+            for &slot in &self.inc[self.start[v] as usize..self.start[v + 1] as usize] {
                 let (t, c) = (slot as usize / 4, slot as usize % 4);
                 for r in 0..3 {
                     gv[r] += gl[t][3 * c + r];
@@ -301,16 +284,11 @@ pub fn untangle_sliding(
     opts: &UntangleOptions,
     device: Option<&Context>,
 ) -> Result<UntangleStats, VolError> {
-    let nv = x.len();
-    if nv != rest.positions.len()
-        || fixed.len() != nv
-        || !(on_sphere.is_empty() || on_sphere.len() == nv)
-    {
+    // The flags are checked against `x` by `untangle_cells`.
+    if x.len() != rest.positions.len() {
         return Err(VolError::Input(format!(
-            "untangle: {} positions, {} fixed and {} sphere flags for a mesh of {} vertices",
-            nv,
-            fixed.len(),
-            on_sphere.len(),
+            "untangle: {} positions for a mesh of {} vertices",
+            x.len(),
             rest.positions.len()
         )));
     }
@@ -348,9 +326,16 @@ pub fn untangle_cells(
         || !(on_sphere.is_empty() || on_sphere.len() == nv)
         || tets.iter().flatten().any(|&v| v as usize >= nv)
     {
-        return Err(VolError::Input(
-            "untangle: cells, corner weights and volumes disagree".into(),
-        ));
+        return Err(VolError::Input(format!(
+            "untangle: {} cells, {} corner weights, {} volumes, {} positions, {} fixed and {} \
+             sphere flags disagree (or a cell names a vertex past the positions)",
+            tets.len(),
+            d.len(),
+            vol.len(),
+            nv,
+            fixed.len(),
+            on_sphere.len()
+        )));
     }
     let sliding: Vec<usize> = (0..on_sphere.len())
         .filter(|&v| on_sphere[v] && !fixed[v])
