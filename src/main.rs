@@ -32,6 +32,7 @@ struct Cli {
 enum Command {
     /// Topology facts and the validation verdict of a mesh.
     Stats {
+        /// Input surface: OBJ, PLY, OFF or STL by extension.
         input: PathBuf,
         /// Print JSON instead of text.
         #[arg(long)]
@@ -53,7 +54,7 @@ enum Command {
     Approx(ApproxArgs),
     /// Time `param` over meshes, energies and backends; prints a Markdown table.
     Bench {
-        /// Input OBJ files (disk topology).
+        /// Input surface files, OBJ, PLY, OFF or STL (disk topology).
         meshes: Vec<PathBuf>,
         /// Energies to run (mips, sd).
         #[arg(long, value_enum, num_args = 1.., default_values = ["mips", "sd"])]
@@ -434,7 +435,8 @@ enum BackendArg {
 
 #[derive(clap::Args)]
 struct ParamArgs {
-    /// Input OBJ (triangles or polygons; polygons are fan-triangulated).
+    /// Input surface: OBJ, PLY, OFF or STL by extension (triangles or polygons; polygons are
+    /// fan-triangulated; STL corners at equal positions are welded).
     input: PathBuf,
     /// Output OBJ: the input's v and f order, plus one vt per vertex.
     #[arg(short, long)]
@@ -572,7 +574,7 @@ struct ParamArgs {
 
 #[derive(clap::Args)]
 struct ApproxArgs {
-    /// Input OBJ (manifold, consistently oriented triangles).
+    /// Input surface, OBJ, PLY, OFF or STL (manifold, consistently oriented triangles).
     input: PathBuf,
     /// Largest number of planar regions.
     #[arg(short, value_name = "K")]
@@ -733,8 +735,8 @@ enum ShadeArg {
 /// Per-corner positions, UVs and indices: what the render pipeline draws.
 type Corners = (Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>);
 
-/// The corners of a triangle surface with zero UVs, for `--shade normals`: an OBJ, or the
-/// boundary surface of a tet mesh (`.mesh`, `.node`/`.ele`; e.g. a `volmap` output).
+/// The corners of a triangle surface with zero UVs, for `--shade normals`: an OBJ, PLY, OFF or
+/// STL surface, or the boundary surface of a tet mesh (`.mesh`, `.node`/`.ele`; e.g. a `volmap` output).
 fn surface_corners(path: &std::path::Path, max_elements: usize) -> foldfree::Result<Corners> {
     let is_tet = matches!(
         path.extension().and_then(|e| e.to_str()),
@@ -747,7 +749,7 @@ fn surface_corners(path: &std::path::Path, max_elements: usize) -> foldfree::Res
             positions: t.positions,
         }
     } else {
-        mesh::obj::read_obj_with_info(path, max_elements)?.0
+        mesh::read_surface(path, max_elements)?.0
     };
     let mut positions = Vec::with_capacity(3 * m.faces.len());
     for f in &m.faces {

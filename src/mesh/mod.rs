@@ -1,8 +1,9 @@
-//! Triangle meshes as flat arrays: loading (OBJ), validation, topology (CSR adjacency, edges,
+//! Triangle meshes as flat arrays: loading (OBJ, PLY, OFF, STL), validation, topology (CSR adjacency, edges,
 //! boundary loops, Euler characteristic, genus), and per-face isometric 2D frames.
 #![forbid(unsafe_code)]
 
 pub mod error;
+pub mod formats;
 pub mod frames;
 pub mod obj;
 pub mod scale;
@@ -10,6 +11,7 @@ pub mod topology;
 pub mod validate;
 
 pub use error::MeshError;
+pub use formats::{read_surface, SurfaceFormat, SurfaceInfo};
 pub use frames::FaceFrames;
 pub use obj::{obj_text_with_corner_uv, obj_text_with_uv, read_obj, read_obj_with_info, ObjInfo};
 pub use scale::Scale;

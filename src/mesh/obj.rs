@@ -35,42 +35,17 @@ pub fn read_obj(path: &Path) -> Result<TriMesh, MeshError> {
 /// checked by validation).
 pub fn read_obj_with_info(path: &Path, max_faces: usize) -> Result<(TriMesh, ObjInfo), MeshError> {
     // Other mesh formats would parse as an OBJ with no faces; name them instead.
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    if let Some(ext) = ext.as_deref() {
-        let what = match ext {
-            "mesh" | "node" | "ele" | "vtk" => {
-                Some("a tetrahedral mesh format; surface maps need a triangle mesh in OBJ")
-            }
-            "off" | "ply" | "stl" | "gltf" | "glb" | "fbx" => {
-                Some("not read by foldfree; convert the surface to OBJ")
-            }
-            _ => None,
-        };
-        if let Some(what) = what {
-            return Err(MeshError::Read {
-                file: path.to_path_buf(),
-                reason: format!("'.{ext}' is {what}"),
-            });
-        }
+    let format = super::formats::SurfaceFormat::from_path(path)?;
+    if format != super::formats::SurfaceFormat::Obj {
+        return Err(MeshError::Read {
+            file: path.to_path_buf(),
+            reason: format!(
+                "a {} file, not OBJ (mesh::read_surface reads both)",
+                format.name()
+            ),
+        });
     }
-    let limit = crate::files::byte_limit(max_faces);
-    let why = format!("an OBJ of at most {max_faces} faces");
-    let bytes = crate::files::read_bounded(path, limit, &why).map_err(|e| match e {
-        crate::files::FileError::TooLarge { .. } => MeshError::TooLarge {
-            file: path.to_path_buf(),
-            what: e.to_string(),
-        },
-        crate::files::FileError::Unreadable { reason, .. } => MeshError::Read {
-            file: path.to_path_buf(),
-            reason,
-        },
-        other => MeshError::Read {
-            file: path.to_path_buf(),
-            reason: other.to_string(),
-        },
-    })?;
+    let bytes = super::formats::read_input(path, max_faces, format)?;
     parse_obj_with_info(bytes, path)
 }
 

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use super::{obj, MeshError, Scale, Topology, TriMesh};
+use super::{formats, MeshError, Scale, Topology, TriMesh};
 
 /// Thresholds of [`validate`].
 #[derive(Clone, Debug, PartialEq)]
@@ -16,7 +16,7 @@ pub struct ValidateOptions {
     /// ([`crate::mesh::topology::split_pinched`]); every other check still applies.
     pub allow_pinched_vertices: bool,
     /// Refuse meshes with more faces than this, and files larger than an OBJ of that many
-    /// faces (a memory / time guard; `None`: no limit).
+    /// faces, whatever the format (a memory / time guard; `None`: no limit).
     pub max_faces: Option<usize>,
 }
 
@@ -54,13 +54,14 @@ pub fn validate(
     validate_with_topology(mesh, file, opts).map(|(report, _)| report)
 }
 
-/// Reads an OBJ file, validates it and builds its topology (built once, shared by the checks).
+/// Reads a surface file (OBJ, PLY, OFF or STL by its extension: [`formats::read_surface`]),
+/// validates it and builds its topology (built once, shared by the checks).
 pub fn load(
     path: &Path,
     opts: &ValidateOptions,
 ) -> Result<(TriMesh, Topology, ValidationReport), MeshError> {
     let max = opts.max_faces.unwrap_or(usize::MAX);
-    let (mesh, _) = obj::read_obj_with_info(path, max)?;
+    let (mesh, _) = formats::read_surface(path, max)?;
     let (report, topo) = validate_with_topology(&mesh, path, opts)?;
     Ok((mesh, topo, report))
 }
