@@ -9,8 +9,8 @@
 //!
 //! Binary: an 80-byte header, a little-endian `u32` triangle count, then 50 bytes per triangle
 //! (normal and three corners as 12 `f32`, a `u16` attribute). The count must match the file's
-//! size exactly. A file is read as ASCII when it starts with `solid` and its size does not
-//! match the binary layout (binary files may start with `solid` too).
+//! size exactly. A file is read as ASCII when it starts with `solid`, its size does not match
+//! the binary layout and it holds no NUL byte (binary files may start with `solid` too).
 //!
 //! ASCII: `solid NAME`, then `facet normal nx ny nz` / `outer loop` / `vertex x y z` … /
 //! `endloop` / `endfacet` per triangle, `endsolid NAME`; several solids may follow each other.
@@ -35,19 +35,8 @@ pub fn parse_stl(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
         let rest = &bytes[i..];
         rest.starts_with(b"solid") && rest.get(5).map_or(true, |b| b.is_ascii_whitespace())
     });
-    if starts_solid && !size_matches {
-        if bytes.contains(&0) {
-            return Err(located(
-                file,
-                format!("byte {HEADER}"),
-                format!(
-                    "starts with `solid` but holds binary data: a binary STL whose triangle count \
-                     {} does not match its size ({} bytes)",
-                    announced.unwrap_or(0),
-                    bytes.len()
-                ),
-            ));
-        }
+    // A NUL byte never occurs in ASCII STL; it marks a binary file whose count is wrong.
+    if starts_solid && !size_matches && !bytes.contains(&0) {
         return parse_ascii(bytes, file);
     }
     parse_binary(bytes, file)
