@@ -1,6 +1,7 @@
 //! The malformed-input corpus (tests/data/bad, described row by row in its README.md) through the
 //! `foldfree` binary: `param FILE -o OUT --init tutte --solver none` and `stats FILE` on every
-//! file in the directory. Bad input exits 2 with exactly one stderr line
+//! surface file in the directory (OBJ, PLY, OFF, STL: read by extension), `volmap`/`volcheck`
+//! on the tet files. Bad input exits 2 with exactly one stderr line
 //! `foldfree: error: FILE: …` and writes nothing; valid input exits 0; nothing panics or hangs.
 //!
 //! The directory is listed, not the table, so a new file without a table row fails the test.
@@ -173,6 +174,51 @@ const CASES: &[Case] = &[
         "face 2 is degenerate (area 5.000e-13, below 2.000e-12",
     ),
     valid("needle_face_above_tolerance.obj"),
+    // PLY, OFF and STL: the same commands, read by extension.
+    bad(
+        "ply_binary_truncated.ply",
+        "cannot read: byte 274: face 1, property `vertex_indices`: a list of 3 items does not fit in the 5 bytes left",
+    ),
+    bad(
+        "ply_face_index_out_of_range.ply",
+        "face 1 refers to vertex 9, but there are only 4 vertices",
+    ),
+    bad(
+        "ply_vertex_count_too_large.ply",
+        "cannot read: line 4: the header announces 1000000 `vertex` elements",
+    ),
+    valid("ply_quad_with_normals_valid.ply"),
+    valid("ply_binary_big_endian_valid.ply"),
+    bad(
+        "off_fewer_faces_than_announced.off",
+        "cannot read: line 9: file ends after 2 of the 3 faces announced",
+    ),
+    bad(
+        "off_more_faces_than_announced.off",
+        "cannot read: line 9: a record past the counts of line 3 (vertices 4, faces 1)",
+    ),
+    bad(
+        "off_face_with_two_vertices.off",
+        "cannot read: line 8: face 1 has 2 vertices, need at least 3",
+    ),
+    valid("coff_quad_valid.off"),
+    bad(
+        "stl_binary_count_larger_than_file.stl",
+        "cannot read: byte 80: the header announces 1000 triangles (84 + 50·1000 = 50084 bytes), the file has 134 bytes",
+    ),
+    bad(
+        "stl_ascii_garbage.stl",
+        "cannot read: line 2: expected `facet` or `endsolid`, found",
+    ),
+    bad(
+        "stl_ascii_misspelt_keyword.stl",
+        "cannot read: line 6: facet 0: expected `vertex` or `endloop`, found \"vertxe\"",
+    ),
+    bad(
+        "stl_ascii_truncated.stl",
+        "cannot read: line 12: file ends inside facet 1",
+    ),
+    valid("stl_binary_square_valid.stl"),
     bad("binary_garbage.mesh", ":1: not UTF-8 text (binary file?)"),
     bad(
         "empty_0_bytes.mesh",

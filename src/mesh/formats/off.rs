@@ -182,7 +182,7 @@ pub fn parse_off(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
         return Err(located(
             file,
             at(n),
-            format!("more records than the {nv} vertices and {nf} faces announced"),
+            format!("a record past the counts of line {counts_line} (vertices {nv}, faces {nf})"),
         ));
     }
     if mesh.faces.is_empty() {
