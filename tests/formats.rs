@@ -168,9 +168,17 @@ fn parse(bytes: &[u8], name: &str, format: SurfaceFormat) -> TriMesh {
 /// Same vertices (bit-equal) and faces, in the same order.
 fn assert_same(name: &str, got: &TriMesh, want: &TriMesh) {
     assert_eq!(got.faces, want.faces, "{name}: faces");
-    assert_eq!(got.positions.len(), want.positions.len(), "{name}: vertex count");
+    assert_eq!(
+        got.positions.len(),
+        want.positions.len(),
+        "{name}: vertex count"
+    );
     for (i, (a, b)) in got.positions.iter().zip(&want.positions).enumerate() {
-        assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits), "{name}: vertex {i}");
+        assert_eq!(
+            a.map(f64::to_bits),
+            b.map(f64::to_bits),
+            "{name}: vertex {i}"
+        );
     }
 }
 
@@ -184,15 +192,27 @@ fn assert_same_triangles(name: &str, got: &TriMesh, want: &TriMesh, round: fn(f6
         for k in 0..3 {
             let gp = got.positions[g[k] as usize];
             let wp = want.positions[w[k] as usize].map(round);
-            assert_eq!(gp.map(f64::to_bits), wp.map(f64::to_bits), "{name}: face {t} corner {k}");
+            assert_eq!(
+                gp.map(f64::to_bits),
+                wp.map(f64::to_bits),
+                "{name}: face {t} corner {k}"
+            );
             let key = wp.map(|c| (c + 0.0).to_bits());
             if !seen.contains(&key) {
-                assert_eq!(g[k] as usize, seen.len(), "{name}: face {t}: first-appearance order");
+                assert_eq!(
+                    g[k] as usize,
+                    seen.len(),
+                    "{name}: face {t}: first-appearance order"
+                );
                 seen.push(key);
             }
         }
     }
-    assert_eq!(got.positions.len(), seen.len(), "{name}: welded vertex count");
+    assert_eq!(
+        got.positions.len(),
+        seen.len(),
+        "{name}: welded vertex count"
+    );
 }
 
 fn as_f32(c: f64) -> f64 {
@@ -206,7 +226,11 @@ fn every_data_mesh_round_trips_through_ply_off_and_stl() {
         assert_same(&format!("{name} as ASCII PLY"), &ply, &mesh);
         for big in [false, true] {
             let ply = parse(&ply_binary(&mesh, big), &name, SurfaceFormat::Ply);
-            assert_same(&format!("{name} as binary PLY (big endian: {big})"), &ply, &mesh);
+            assert_same(
+                &format!("{name} as binary PLY (big endian: {big})"),
+                &ply,
+                &mesh,
+            );
         }
         for keyword in ["OFF", "COFF", "NOFF"] {
             let got = parse(&off(&mesh, keyword), &name, SurfaceFormat::Off);
@@ -224,11 +248,36 @@ fn files_are_read_by_extension_with_format_and_encoding_reported() {
     let dir = TempDir::new("formats_by_extension");
     let mesh = read_obj(&data_dir().join("two_triangles.obj")).expect("reads");
     let cases: [(&str, Vec<u8>, SurfaceFormat, Encoding); 5] = [
-        ("a.PLY", ply_ascii(&mesh), SurfaceFormat::Ply, Encoding::Text),
-        ("b.ply", ply_binary(&mesh, true), SurfaceFormat::Ply, Encoding::BinaryBigEndian),
-        ("c.off", off(&mesh, "OFF"), SurfaceFormat::Off, Encoding::Text),
-        ("d.stl", stl_ascii(&mesh), SurfaceFormat::Stl, Encoding::Text),
-        ("e.Stl", stl_binary(&mesh), SurfaceFormat::Stl, Encoding::BinaryLittleEndian),
+        (
+            "a.PLY",
+            ply_ascii(&mesh),
+            SurfaceFormat::Ply,
+            Encoding::Text,
+        ),
+        (
+            "b.ply",
+            ply_binary(&mesh, true),
+            SurfaceFormat::Ply,
+            Encoding::BinaryBigEndian,
+        ),
+        (
+            "c.off",
+            off(&mesh, "OFF"),
+            SurfaceFormat::Off,
+            Encoding::Text,
+        ),
+        (
+            "d.stl",
+            stl_ascii(&mesh),
+            SurfaceFormat::Stl,
+            Encoding::Text,
+        ),
+        (
+            "e.Stl",
+            stl_binary(&mesh),
+            SurfaceFormat::Stl,
+            Encoding::BinaryLittleEndian,
+        ),
     ];
     for (file, bytes, format, encoding) in cases {
         let path = dir.join(file);
@@ -253,11 +302,14 @@ fn polygons_are_fan_triangulated_like_obj() {
     let ply = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
                property float z\nelement face 1\nproperty list uchar int vertex_index\nend_header\n\
                0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n";
-    let (m, _) = parse_surface(ply.as_bytes(), Path::new("q.ply"), SurfaceFormat::Ply)
-        .expect("quad");
+    let (m, _) =
+        parse_surface(ply.as_bytes(), Path::new("q.ply"), SurfaceFormat::Ply).expect("quad");
     assert_eq!(m.faces, vec![[0, 1, 2], [0, 2, 3]]);
-    let obj = foldfree::mesh::obj::parse_obj("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n", Path::new("q.obj"))
-        .expect("quad obj");
+    let obj = foldfree::mesh::obj::parse_obj(
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n",
+        Path::new("q.obj"),
+    )
+    .expect("quad obj");
     assert_eq!(m.faces, obj.faces);
 }
 
@@ -274,14 +326,21 @@ fn malformed_files_give_located_errors() {
     let mesh = read_obj(&data_dir().join("square_grid_10x10.obj")).expect("reads");
     // Binary PLY cut anywhere inside the body: a located error, never a panic.
     let full = ply_binary(&mesh, false);
-    let body = full.windows(11).position(|w| w == b"end_header\n").expect("header") + 11;
+    let body = full
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .expect("header")
+        + 11;
     for cut in [body, body + 1, body + 100, full.len() - 1] {
         let e = error(&full[..cut], SurfaceFormat::Ply);
         assert!(e.starts_with("t: cannot read: "), "{e}");
         assert!(e.contains("byte ") || e.contains("line "), "{e}");
     }
     let e = error(&full[..full.len() - 1], SurfaceFormat::Ply);
-    assert!(e.contains("face 199, property `vertex_indices`: a list of 3 items does not fit"), "{e}");
+    assert!(
+        e.contains("face 199, property `vertex_indices`: a list of 3 items does not fit"),
+        "{e}"
+    );
     let e = error(&full[..body + 100], SurfaceFormat::Ply);
     assert!(
         e.contains("line 3: the header announces 121 `vertex` elements of at least 30 bytes each, but only 100 bytes follow"),
@@ -292,25 +351,52 @@ fn malformed_files_give_located_errors() {
                property float z\nelement face 1\nproperty list uchar int vertex_indices\n\
                end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n";
     let e = error(bad.as_bytes(), SurfaceFormat::Ply);
-    assert!(e.contains("face 0 refers to vertex 7, but there are only 3 vertices"), "{e}");
+    assert!(
+        e.contains("face 0 refers to vertex 7, but there are only 3 vertices"),
+        "{e}"
+    );
     // A header count far beyond the file is refused before anything is reserved.
     let huge = bad.replace("element vertex 3", "element vertex 4000000000000");
     let e = error(huge.as_bytes(), SurfaceFormat::Ply);
-    assert!(e.contains("line 3: the header announces 4000000000000 `vertex` elements"), "{e}");
+    assert!(
+        e.contains("line 3: the header announces 4000000000000 `vertex` elements"),
+        "{e}"
+    );
     // OFF: fewer faces than announced; a face with too few indices.
-    let e = error(b"OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", SurfaceFormat::Off);
-    assert!(e.contains("line 6: file ends after 1 of the 2 faces announced"), "{e}");
-    let e = error(b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n", SurfaceFormat::Off);
-    assert!(e.contains("line 6: face 0 announces 4 vertices, the line gives 3"), "{e}");
+    let e = error(
+        b"OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        SurfaceFormat::Off,
+    );
+    assert!(
+        e.contains("line 6: file ends after 1 of the 2 faces announced"),
+        "{e}"
+    );
+    let e = error(
+        b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n",
+        SurfaceFormat::Off,
+    );
+    assert!(
+        e.contains("line 6: face 0 announces 4 vertices, the line gives 3"),
+        "{e}"
+    );
     let e = error(b"OFF BINARY\n", SurfaceFormat::Off);
     assert!(e.contains("line 1: binary OFF is not read"), "{e}");
     // STL: a binary count larger than the file; ASCII garbage.
     let mut stl = stl_binary(&mesh);
     stl[80..84].copy_from_slice(&u32::MAX.to_le_bytes());
     let e = error(&stl, SurfaceFormat::Stl);
-    assert!(e.contains("byte 80: the header announces 4294967295 triangles"), "{e}");
-    let e = error(b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 zero\n", SurfaceFormat::Stl);
-    assert!(e.contains("line 4: facet 0: vertex coordinate \"zero\" is not a number"), "{e}");
+    assert!(
+        e.contains("byte 80: the header announces 4294967295 triangles"),
+        "{e}"
+    );
+    let e = error(
+        b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 zero\n",
+        SurfaceFormat::Stl,
+    );
+    assert!(
+        e.contains("line 4: facet 0: vertex coordinate \"zero\" is not a number"),
+        "{e}"
+    );
     // No faces: the same error as an OBJ without faces.
     for (bytes, format) in [
         (&b"OFF\n0 0 0\n"[..], SurfaceFormat::Off),
@@ -318,6 +404,43 @@ fn malformed_files_give_located_errors() {
     ] {
         let e = parse_surface(bytes, Path::new("t"), format).expect_err("empty");
         assert!(matches!(e, MeshError::Empty { .. }), "{e}");
+    }
+}
+
+/// A small deterministic stand-in for the fuzzer (`fuzz/fuzz_targets/surface_reader.rs`): every
+/// prefix of each encoding of a small mesh, and every byte replaced by a few values, parses to a
+/// mesh with in-range indices or to an error naming the file; never a panic.
+#[test]
+fn every_prefix_and_byte_mutation_is_a_mesh_or_a_located_error() {
+    let mesh = read_obj(&data_dir().join("unreferenced_vertex.obj")).expect("reads");
+    let files = [
+        (ply_ascii(&mesh), SurfaceFormat::Ply),
+        (ply_binary(&mesh, false), SurfaceFormat::Ply),
+        (ply_binary(&mesh, true), SurfaceFormat::Ply),
+        (off(&mesh, "COFF"), SurfaceFormat::Off),
+        (stl_ascii(&mesh), SurfaceFormat::Stl),
+        (stl_binary(&mesh), SurfaceFormat::Stl),
+    ];
+    let check =
+        |bytes: &[u8], format: SurfaceFormat| match parse_surface(bytes, Path::new("m"), format) {
+            Ok((m, _)) => {
+                let n = m.positions.len();
+                assert!(m.faces.iter().flatten().all(|&v| (v as usize) < n));
+            }
+            Err(e) => assert!(e.to_string().starts_with("m: "), "{e}"),
+        };
+    for (bytes, format) in &files {
+        for cut in 0..bytes.len() {
+            check(&bytes[..cut], *format);
+        }
+        let mut mutated = bytes.clone();
+        for i in 0..bytes.len() {
+            for b in [0u8, b'9', b'\n', b'-', 0xff] {
+                mutated[i] = b;
+                check(&mutated, *format);
+            }
+            mutated[i] = bytes[i];
+        }
     }
 }
 
@@ -390,8 +513,14 @@ fn cli_reads_ply_off_and_stl() {
         fs::read(&out).expect("written")
     };
     let reference = tutte(&obj, "obj.obj");
-    assert!(tutte(&ply, "ply.obj") == reference, "PLY map differs from the OBJ map");
-    assert!(tutte(&off_path, "off.obj") == reference, "OFF map differs from the OBJ map");
+    assert!(
+        tutte(&ply, "ply.obj") == reference,
+        "PLY map differs from the OBJ map"
+    );
+    assert!(
+        tutte(&off_path, "off.obj") == reference,
+        "OFF map differs from the OBJ map"
+    );
 
     let stats = |input: &Path| {
         let (code, stdout, stderr) = foldfree(&[Path::new("stats"), input]);

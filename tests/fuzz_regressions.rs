@@ -28,6 +28,23 @@ fn fuzzer_finds_stay_fixed() {
                     assert!(e.to_string().contains(&name), "{e}");
                 }
             }
+            Some(ext @ ("ply" | "off" | "stl")) => {
+                let format = match ext {
+                    "ply" => foldfree::mesh::SurfaceFormat::Ply,
+                    "off" => foldfree::mesh::SurfaceFormat::Off,
+                    _ => foldfree::mesh::SurfaceFormat::Stl,
+                };
+                match foldfree::mesh::formats::parse_surface(&bytes, &path, format) {
+                    Ok((mesh, _)) => {
+                        let _ = foldfree::mesh::validate::validate_with_topology(
+                            &mesh,
+                            &path,
+                            &Default::default(),
+                        );
+                    }
+                    Err(e) => assert!(e.to_string().contains(&name), "{e}"),
+                }
+            }
             Some("node") => {
                 let _ = foldfree::vol::tetgen::parse_node(&text, &path);
             }

@@ -157,7 +157,11 @@ pub(crate) fn read_input(
     format: SurfaceFormat,
 ) -> Result<Vec<u8>, MeshError> {
     let limit = crate::files::byte_limit(max_faces);
-    let why = format!("{} {} of at most {max_faces} faces", article(format), format.name());
+    let why = format!(
+        "{} {} of at most {max_faces} faces",
+        article(format),
+        format.name()
+    );
     crate::files::read_bounded(path, limit, &why).map_err(|e| match e {
         crate::files::FileError::TooLarge { .. } => MeshError::TooLarge {
             file: path.to_path_buf(),

@@ -13,9 +13,7 @@
 use std::path::Path;
 
 use super::text::{parse_f64, parse_i64, shown, tokens, uncommented, Lines};
-use super::{
-    located, push_fan, reserve_for, vertex_index, Encoding, SurfaceFormat, SurfaceInfo,
-};
+use super::{located, push_fan, reserve_for, vertex_index, Encoding, SurfaceFormat, SurfaceInfo};
 use crate::mesh::{MeshError, TriMesh};
 
 /// Parses an ASCII OFF file; `file` names the source in errors (`line N: …`, 1-based).
@@ -46,7 +44,10 @@ pub fn parse_off(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
     } else {
         check_keyword(keyword, file, first_line)?;
         let rest: Vec<&[u8]> = head.collect();
-        if rest.first().is_some_and(|t| t.eq_ignore_ascii_case(b"BINARY")) {
+        if rest
+            .first()
+            .is_some_and(|t| t.eq_ignore_ascii_case(b"BINARY"))
+        {
             return Err(located(
                 file,
                 at(first_line),
@@ -158,7 +159,10 @@ pub fn parse_off(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
         for t in toks.by_ref().take(k) {
             let written = parse_i64(t).map_err(|too_long| {
                 let what = if too_long {
-                    format!("face {f} vertex index {} is out of range (more than 64 bits)", shown(t))
+                    format!(
+                        "face {f} vertex index {} is out of range (more than 64 bits)",
+                        shown(t)
+                    )
                 } else {
                     format!("face {f} vertex index {} is not an integer", shown(t))
                 };

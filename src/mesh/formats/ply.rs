@@ -16,9 +16,7 @@
 use std::path::Path;
 
 use super::text::{parse_f64, parse_i64, shown, Lines, Tokens};
-use super::{
-    located, push_fan, reserve_for, vertex_index, Encoding, SurfaceFormat, SurfaceInfo,
-};
+use super::{located, push_fan, reserve_for, vertex_index, Encoding, SurfaceFormat, SurfaceInfo};
 use crate::mesh::{MeshError, TriMesh};
 
 /// A PLY scalar type.
@@ -131,7 +129,11 @@ pub fn parse_ply(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
     let header = parse_header(bytes, file)?;
     let vertex = header.elements.iter().position(|e| e.name == "vertex");
     let Some(vertex) = vertex else {
-        return Err(located(file, "line 1", "the header declares no `vertex` element"));
+        return Err(located(
+            file,
+            "line 1",
+            "the header declares no `vertex` element",
+        ));
     };
     let v_el = &header.elements[vertex];
     let mut xyz = [0usize; 3];
@@ -316,7 +318,11 @@ fn parse_header(bytes: &[u8], file: &Path) -> Result<Header, MeshError> {
             ));
         };
         let text = std::str::from_utf8(line).map_err(|_| {
-            located(file, at(n), "the header is not text (binary data before `end_header`)")
+            located(
+                file,
+                at(n),
+                "the header is not text (binary data before `end_header`)",
+            )
         })?;
         let words: Vec<&str> = text.split_ascii_whitespace().collect();
         let bad = |what: String| located(file, at(n), what);
@@ -328,7 +334,12 @@ fn parse_header(bytes: &[u8], file: &Path) -> Result<Header, MeshError> {
                     "ascii" => Encoding::Text,
                     "binary_little_endian" => Encoding::BinaryLittleEndian,
                     "binary_big_endian" => Encoding::BinaryBigEndian,
-                    other => return Err(bad(format!("unknown PLY format {}", shown(other.as_bytes())))),
+                    other => {
+                        return Err(bad(format!(
+                            "unknown PLY format {}",
+                            shown(other.as_bytes())
+                        )))
+                    }
                 });
             }
             ["element", name, count] => {
@@ -356,8 +367,9 @@ fn parse_header(bytes: &[u8], file: &Path) -> Result<Header, MeshError> {
                     return Err(bad("`property` before any `element`".to_string()));
                 };
                 let ty = |name: &str| {
-                    Scalar::parse(name.as_bytes())
-                        .ok_or_else(|| bad(format!("unknown property type {}", shown(name.as_bytes()))))
+                    Scalar::parse(name.as_bytes()).ok_or_else(|| {
+                        bad(format!("unknown property type {}", shown(name.as_bytes())))
+                    })
                 };
                 let prop = match rest {
                     ["list", count, item, name] => Property {
@@ -492,7 +504,11 @@ impl<'a> Reader<'a> {
     /// The next text token, or an error naming the value that is missing.
     fn token(&mut self, at: &Where<'_>) -> Result<(usize, &'a [u8]), MeshError> {
         let Body::Text(t) = &mut self.body else {
-            return Err(located(self.file, "byte 0", "internal: text read of a binary body"));
+            return Err(located(
+                self.file,
+                "byte 0",
+                "internal: text read of a binary body",
+            ));
         };
         match t.next_token() {
             Some(tok) => Ok(tok),
@@ -501,7 +517,9 @@ impl<'a> Reader<'a> {
                 Err(located(
                     self.file,
                     format!("line {line}"),
-                    format!("{at}: the file ends here (truncated, or the header's counts are wrong)"),
+                    format!(
+                        "{at}: the file ends here (truncated, or the header's counts are wrong)"
+                    ),
                 ))
             }
         }
@@ -515,7 +533,11 @@ impl<'a> Reader<'a> {
             big_endian,
         } = &mut self.body
         else {
-            return Err(located(file, "byte 0", "internal: binary read of a text body"));
+            return Err(located(
+                file,
+                "byte 0",
+                "internal: binary read of a text body",
+            ));
         };
         let size = ty.size();
         let Some(b) = pos.checked_add(size).and_then(|end| bytes.get(*pos..end)) else {
@@ -582,13 +604,21 @@ impl<'a> Reader<'a> {
             _ => Err(located(
                 self.file,
                 format!("line {line}"),
-                format!("{at}: {} is not an integer of its type ({lo}..={hi})", shown(tok)),
+                format!(
+                    "{at}: {} is not an integer of its type ({lo}..={hi})",
+                    shown(tok)
+                ),
             )),
         }
     }
 
     /// A list's length; in binary, checked against the bytes left before its items are read.
-    fn list_len(&mut self, count: Scalar, item: Scalar, at: &Where<'_>) -> Result<usize, MeshError> {
+    fn list_len(
+        &mut self,
+        count: Scalar,
+        item: Scalar,
+        at: &Where<'_>,
+    ) -> Result<usize, MeshError> {
         let n = if count.is_integer() {
             self.int(count, at)?
         } else {
@@ -605,7 +635,9 @@ impl<'a> Reader<'a> {
             if n.checked_mul(item.size()).map_or(true, |need| need > left) {
                 return Err(self.error(
                     at,
-                    format!("a list of {n} items does not fit in the {left} bytes left (truncated?)"),
+                    format!(
+                        "a list of {n} items does not fit in the {left} bytes left (truncated?)"
+                    ),
                 ));
             }
         }

@@ -84,7 +84,11 @@ impl Welder {
 }
 
 fn too_many(file: &Path, at: String) -> MeshError {
-    located(file, at, "more distinct vertices than 32-bit indices can address")
+    located(
+        file,
+        at,
+        "more distinct vertices than 32-bit indices can address",
+    )
 }
 
 fn parse_binary(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), MeshError> {
@@ -217,7 +221,9 @@ fn parse_ascii(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Mesh
                         return Err(located(
                             file,
                             format!("line {}", toks.line()),
-                            format!("file ends inside facet {face} (expected `vertex` or `endloop`)"),
+                            format!(
+                                "file ends inside facet {face} (expected `vertex` or `endloop`)"
+                            ),
                         ));
                     };
                     if t.eq_ignore_ascii_case(b"endloop") {
@@ -262,7 +268,10 @@ fn parse_ascii(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Mesh
                     return Err(located(
                         file,
                         at,
-                        format!("facet {face} has {} vertices, need at least 3", corners.len()),
+                        format!(
+                            "facet {face} has {} vertices, need at least 3",
+                            corners.len()
+                        ),
                     ));
                 }
                 corner_count += corners.len();
