@@ -106,16 +106,7 @@ pub fn validate_with_topology(
         }
     }
 
-    for (f, tri) in mesh.faces.iter().enumerate() {
-        if let Some(&v) = tri.iter().find(|&&v| v as usize >= nv) {
-            return Err(MeshError::IndexOutOfRange {
-                file: file.to_path_buf(),
-                face: f,
-                index: i64::from(v),
-                count: nv,
-            });
-        }
-    }
+    check_indices(mesh, file)?;
 
     for (f, &[a, b, c]) in mesh.faces.iter().enumerate() {
         let repeated = if a == b || a == c {
@@ -217,6 +208,22 @@ pub fn validate_with_topology(
         min_face_area,
     };
     Ok((report, topo))
+}
+
+/// `IndexOutOfRange` for the first face that refers past the vertices.
+pub(crate) fn check_indices(mesh: &TriMesh, file: &Path) -> Result<(), MeshError> {
+    let nv = mesh.positions.len();
+    for (f, tri) in mesh.faces.iter().enumerate() {
+        if let Some(&v) = tri.iter().find(|&&v| v as usize >= nv) {
+            return Err(MeshError::IndexOutOfRange {
+                file: file.to_path_buf(),
+                face: f,
+                index: i64::from(v),
+                count: nv,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// The duplicate cell (same vertex set, any order) with the smallest index and the first cell

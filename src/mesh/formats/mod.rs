@@ -185,6 +185,20 @@ fn article(format: SurfaceFormat) -> &'static str {
     }
 }
 
+/// The parsed mesh, or `Empty` (the OBJ reader's error) when the file has no faces.
+fn finish(
+    mesh: TriMesh,
+    info: SurfaceInfo,
+    file: &Path,
+) -> Result<(TriMesh, SurfaceInfo), MeshError> {
+    if mesh.faces.is_empty() {
+        return Err(MeshError::Empty {
+            file: file.to_path_buf(),
+        });
+    }
+    Ok((mesh, info))
+}
+
 /// A `Read` error at a place in the file: `at` is "line N" or "byte N".
 fn located(file: &Path, at: impl std::fmt::Display, what: impl std::fmt::Display) -> MeshError {
     MeshError::Read {

@@ -13,7 +13,9 @@
 use std::path::Path;
 
 use super::text::{parse_f64, parse_i64, shown, tokens, uncommented, Lines};
-use super::{located, push_fan, reserve_for, vertex_index, Encoding, SurfaceFormat, SurfaceInfo};
+use super::{
+    finish, located, push_fan, reserve_for, vertex_index, Encoding, SurfaceFormat, SurfaceInfo,
+};
 use crate::mesh::{MeshError, TriMesh};
 
 /// Parses an ASCII OFF file; `file` names the source in errors (`line N: …`, 1-based).
@@ -91,16 +93,21 @@ pub fn parse_off(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
         positions: reserve_for(nv, left, 6),
         faces: reserve_for(nf, left, 8),
     };
+    // The next record, or where the file ends short of the counts.
     let mut last_line = counts_line;
-    for v in 0..nv {
-        let Some((n, line)) = records.next() else {
-            return Err(located(
+    let mut record = |i: usize, of: usize, what: &str| {
+        let (n, line) = records.next().ok_or_else(|| {
+            located(
                 file,
                 at(last_line),
-                format!("file ends after {v} of the {nv} vertices announced"),
-            ));
-        };
+                format!("file ends after {i} of the {of} {what} announced"),
+            )
+        })?;
         last_line = n;
+        Ok::<_, MeshError>((n, line))
+    };
+    for v in 0..nv {
+        let (n, line) = record(v, nv, "vertices")?;
         let mut xyz = [0.0; 3];
         let mut toks = tokens(line);
         for (k, c) in xyz.iter_mut().enumerate() {
@@ -124,14 +131,7 @@ pub fn parse_off(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
 
     let mut corners = Vec::new();
     for f in 0..nf {
-        let Some((n, line)) = records.next() else {
-            return Err(located(
-                file,
-                at(last_line),
-                format!("file ends after {f} of the {nf} faces announced"),
-            ));
-        };
-        last_line = n;
+        let (n, line) = record(f, nf, "faces")?;
         let mut toks = tokens(line);
         let head = toks.next().unwrap_or_default();
         let k = parse_i64(head)
@@ -189,12 +189,7 @@ pub fn parse_off(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
             format!("a record past the counts of line {counts_line} (vertices {nv}, faces {nf})"),
         ));
     }
-    if mesh.faces.is_empty() {
-        return Err(MeshError::Empty {
-            file: file.to_path_buf(),
-        });
-    }
-    Ok((mesh, info))
+    finish(mesh, info, file)
 }
 
 /// `[ST][C][N]OFF` in any order of C and N; 4D and nD variants are refused by name.

@@ -16,7 +16,9 @@
 use std::path::Path;
 
 use super::text::{parse_f64, parse_i64, shown, Lines, Tokens};
-use super::{located, push_fan, reserve_for, vertex_index, Encoding, SurfaceFormat, SurfaceInfo};
+use super::{
+    finish, located, push_fan, reserve_for, vertex_index, Encoding, SurfaceFormat, SurfaceInfo,
+};
 use crate::mesh::{MeshError, TriMesh};
 
 /// A PLY scalar type.
@@ -264,23 +266,10 @@ pub fn parse_ply(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
         }
     }
     reader.finish()?;
-    let nv = mesh.positions.len();
-    for (f, tri) in mesh.faces.iter().enumerate() {
-        if let Some(&v) = tri.iter().find(|&&v| v as usize >= nv) {
-            return Err(MeshError::IndexOutOfRange {
-                file: file.to_path_buf(),
-                face: f,
-                index: i64::from(v),
-                count: nv,
-            });
-        }
-    }
-    if mesh.faces.is_empty() {
-        return Err(MeshError::Empty {
-            file: file.to_path_buf(),
-        });
-    }
-    Ok((mesh, info))
+    // Indices were checked against u32::MAX while reading (a `face` element may precede
+    // `vertex`); now against the vertex count.
+    crate::mesh::validate::check_indices(&mesh, file)?;
+    finish(mesh, info, file)
 }
 
 impl Element {

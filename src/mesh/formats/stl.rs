@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::text::{parse_f64, shown, Tokens};
-use super::{located, push_fan, Encoding, SurfaceFormat, SurfaceInfo};
+use super::{finish, located, push_fan, Encoding, SurfaceFormat, SurfaceInfo};
 use crate::mesh::{MeshError, TriMesh};
 
 const HEADER: usize = 80;
@@ -81,6 +81,22 @@ impl Welder {
         self.positions.push(p);
         Some(v)
     }
+
+    /// The mesh of the welded vertices, counting the `corners` read that were merged.
+    fn finish(
+        self,
+        faces: Vec<[u32; 3]>,
+        corners: usize,
+        mut info: SurfaceInfo,
+        file: &Path,
+    ) -> Result<(TriMesh, SurfaceInfo), MeshError> {
+        info.skipped = corners.saturating_sub(self.positions.len());
+        let mesh = TriMesh {
+            positions: self.positions,
+            faces,
+        };
+        finish(mesh, info, file)
+    }
 }
 
 fn too_many(file: &Path, at: String) -> MeshError {
@@ -135,17 +151,7 @@ fn parse_binary(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Mes
         }
         push_fan(&mut faces, &tri, &mut info);
     }
-    info.skipped = 3 * count - welder.positions.len();
-    let mesh = TriMesh {
-        positions: welder.positions,
-        faces,
-    };
-    if mesh.faces.is_empty() {
-        return Err(MeshError::Empty {
-            file: file.to_path_buf(),
-        });
-    }
-    Ok((mesh, info))
+    welder.finish(faces, 3 * count, info, file)
 }
 
 fn parse_ascii(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), MeshError> {
@@ -294,15 +300,5 @@ fn parse_ascii(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Mesh
             }
         }
     }
-    info.skipped = corner_count - welder.positions.len();
-    let mesh = TriMesh {
-        positions: welder.positions,
-        faces,
-    };
-    if mesh.faces.is_empty() {
-        return Err(MeshError::Empty {
-            file: file.to_path_buf(),
-        });
-    }
-    Ok((mesh, info))
+    welder.finish(faces, corner_count, info, file)
 }
