@@ -311,6 +311,26 @@ fn polygons_are_fan_triangulated_like_obj() {
     )
     .expect("quad obj");
     assert_eq!(m.faces, obj.faces);
+    // Elements in any order: faces before the vertices they name.
+    let faces_first =
+        "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\n\
+                       element vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+                       end_header\n3 2 1 0\n0 0 0\n1 0 0\n0 1 0\n";
+    let (m, _) = parse_surface(
+        faces_first.as_bytes(),
+        Path::new("r.ply"),
+        SurfaceFormat::Ply,
+    )
+    .expect("faces first");
+    assert_eq!((m.faces, m.positions.len()), (vec![[2, 1, 0]], 3));
+    let e = error(
+        faces_first.replace("3 2 1 0", "3 2 1 -1").as_bytes(),
+        SurfaceFormat::Ply,
+    );
+    assert!(
+        e.contains("face 0 refers to vertex -1, but there are only 3 vertices"),
+        "{e}"
+    );
 }
 
 /// The error of parsing `bytes` as `format`, as the CLI prints it (after `foldfree: error: `).

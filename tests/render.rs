@@ -292,6 +292,23 @@ fn distinct_foreground(px: &[[u8; 4]]) -> usize {
         .len()
 }
 
+/// `foldfree render INPUT -o PNG --shade normals --size SIZE VIEW --validation`.
+fn render_normals(input: &Path, png: &Path, size: u32, view: &str) -> std::process::Output {
+    let size = size.to_string();
+    foldfree(&[
+        "render",
+        input.to_str().expect("utf-8 path"),
+        "-o",
+        png.to_str().expect("utf-8 path"),
+        "--shade",
+        "normals",
+        "--size",
+        &size,
+        view,
+        "--validation",
+    ])
+}
+
 /// `--shade normals` renders any triangle mesh (no `vt` needed) with one colour per flat
 /// normal: the planar approximation of the block (`foldfree approx -k 24`) shows at most as
 /// many colours as it has planar regions, far fewer than the curved original.
@@ -321,18 +338,7 @@ fn render_normals_of_an_approximation() {
         .expect("report.k_obtained") as usize;
     let render = |input: &Path, name: &str| {
         let png = dir.join(name);
-        let out = foldfree(&[
-            "render",
-            input.to_str().expect("utf-8 path"),
-            "-o",
-            png.to_str().expect("utf-8 path"),
-            "--shade",
-            "normals",
-            "--size",
-            "256",
-            "--view=1,1,1",
-            "--validation",
-        ]);
+        let out = render_normals(input, &png, 256, "--view=1,1,1");
         check_ok(&out, "foldfree render --shade normals");
         let (w, h, px) = decode(&fs::read(&png).expect("PNG written"));
         assert_eq!((w, h), (256, 256));
@@ -362,18 +368,7 @@ fn render_normals_of_a_tet_boundary() {
     let dir = TempDir::new("tet_boundary");
     let png = dir.join("cube.png");
     let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_5tets.mesh");
-    let out = foldfree(&[
-        "render",
-        input.to_str().expect("utf-8 path"),
-        "-o",
-        png.to_str().expect("utf-8 path"),
-        "--shade",
-        "normals",
-        "--size",
-        "128",
-        "--view=1,1,1",
-        "--validation",
-    ]);
+    let out = render_normals(&input, &png, 128, "--view=1,1,1");
     check_ok(&out, "foldfree render cube_5tets.mesh");
     let (w, h, px) = decode(&fs::read(&png).expect("PNG written"));
     let s = stats(w, h, &px);
@@ -383,4 +378,45 @@ fn render_normals_of_a_tet_boundary() {
         3,
         "three visible faces, one colour each"
     );
+}
+
+/// PLY, OFF and STL surfaces render like OBJ: the unit square as a quad OBJ, ASCII and binary
+/// PLY, COFF and binary STL (tests/data/bad, all valid) gives the same picture byte for byte.
+/// The checker needs `vt`, which only an OBJ carries: other formats are refused by name.
+#[test]
+fn render_normals_reads_every_surface_format() {
+    let bad = |name: &str| data("bad").join(name);
+    let dir = TempDir::new("formats");
+    let stl = bad("stl_binary_square_valid.stl");
+    let png = dir.join("checker.png");
+    let out = foldfree(&[
+        "render",
+        stl.to_str().expect("utf-8 path"),
+        "-o",
+        png.to_str().expect("utf-8 path"),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("no texture coordinates") && stderr.contains("this STL surface"),
+        "{stderr}"
+    );
+    if !vulkan_available() {
+        return;
+    }
+    let render = |input: &Path| {
+        let png = dir.join("normals.png");
+        let out = render_normals(input, &png, 64, "--view=0.3,0.2,1");
+        check_ok(&out, &format!("foldfree render {}", input.display()));
+        fs::read(&png).expect("PNG written")
+    };
+    let reference = render(&bad("quad_valid.obj"));
+    for name in [
+        "ply_quad_with_normals_valid.ply",
+        "ply_binary_big_endian_valid.ply",
+        "coff_quad_valid.off",
+        "stl_binary_square_valid.stl",
+    ] {
+        assert!(render(&bad(name)) == reference, "{name}: another picture");
+    }
 }

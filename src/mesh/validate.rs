@@ -211,7 +211,7 @@ pub fn validate_with_topology(
 }
 
 /// `IndexOutOfRange` for the first face that refers past the vertices.
-pub(crate) fn check_indices(mesh: &TriMesh, file: &Path) -> Result<(), MeshError> {
+fn check_indices(mesh: &TriMesh, file: &Path) -> Result<(), MeshError> {
     let nv = mesh.positions.len();
     for (f, tri) in mesh.faces.iter().enumerate() {
         if let Some(&v) = tri.iter().find(|&&v| v as usize >= nv) {

@@ -147,6 +147,16 @@ fn no_vt(name: &str) -> Error {
 
 /// Reads `path` with [`parse_obj_with_uv`].
 pub fn read_obj_with_uv(path: &Path, max_faces: usize) -> Result<UvObj> {
+    // PLY, OFF and STL surfaces carry no UVs foldfree reads: say so rather than "binary file?".
+    let format = crate::mesh::SurfaceFormat::from_path(path)?;
+    if format != crate::mesh::SurfaceFormat::Obj {
+        return Err(Error::Usage(format!(
+            "{}: no texture coordinates: the checker needs an OBJ with `vt`; draw this {} \
+             surface with --shade normals, or map it with `foldfree param` (its output is OBJ)",
+            path.display(),
+            format.name()
+        )));
+    }
     let limit = crate::files::byte_limit(max_faces);
     let bytes = crate::files::read_bounded(path, limit, "the --max-faces limit")?;
     let text = String::from_utf8(bytes).map_err(|_| {

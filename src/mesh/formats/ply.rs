@@ -138,6 +138,7 @@ pub fn parse_ply(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
         ));
     };
     let v_el = &header.elements[vertex];
+    let vertex_count = v_el.count;
     let mut xyz = [0usize; 3];
     for (slot, axis) in xyz.iter_mut().zip(["x", "y", "z"]) {
         *slot = v_el.scalar(axis).ok_or_else(|| {
@@ -241,9 +242,9 @@ pub fn parse_ply(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
                             let first = mesh.faces.len();
                             corners.clear();
                             for &w in &written {
-                                // Against u32::MAX here (a `face` element may come before
-                                // `vertex`), against the vertex count at the end.
-                                corners.push(vertex_index(file, w, u32::MAX as usize, first)?);
+                                // Against the announced count: a `face` element may come
+                                // before `vertex`, and a file that parses has that many.
+                                corners.push(vertex_index(file, w, vertex_count, first)?);
                             }
                             push_fan(&mut mesh.faces, &corners, &mut info);
                         } else {
@@ -266,9 +267,6 @@ pub fn parse_ply(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
         }
     }
     reader.finish()?;
-    // Indices were checked against u32::MAX while reading (a `face` element may precede
-    // `vertex`); now against the vertex count.
-    crate::mesh::validate::check_indices(&mesh, file)?;
     finish(mesh, info, file)
 }
 
