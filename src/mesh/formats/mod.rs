@@ -1,10 +1,12 @@
 //! Surface mesh files in: OBJ, PLY (ASCII, binary little and big endian), OFF (ASCII) and STL
 //! (ASCII and binary), chosen by the file's extension; anything else is read as OBJ.
 //!
-//! The PLY, OFF and STL parsers are written here rather than taken from a crate (`ply-rs`,
-//! `stl_io`): those return `io::Error`s without the line or byte where a file breaks, `stl_io`
-//! keeps `f32` and reserves by the header's triangle count, and none reads an OBJ-like "keep
-//! the file's order" contract. Each parser here
+//! The PLY, OFF and STL parsers are written here rather than taken from a crate: `stl_io`
+//! returns plain `io::Error`s (no line or byte offset) and keeps `f32` coordinates (an ASCII
+//! STL's decimals would be rounded), and with `ply-rs` we would still have to map its errors
+//! and records back to lines, bytes and elements. The three formats are small; a parser of our
+//! own names every error's place and checks every header count against the bytes left before
+//! it reserves anything. Each parser here
 //! - keeps the file's vertex and face order (PLY, OFF) so the output's `v`/`f` order is the
 //!   input's, like the OBJ reader ([`super::obj`]);
 //! - fan-triangulates polygons `(a0, a_i, a_{i+1})` like the OBJ reader;
