@@ -34,6 +34,7 @@ use foldfree::gpu::{
 use foldfree::init::{count_flips, TutteWeights};
 use foldfree::init::{initial_map, normalize_area, InitMethod};
 use foldfree::mesh::{self, TriMesh};
+use foldfree::param::admm::cpu::Penalty;
 use foldfree::param::admm::driver::{map_energy, Executor, Residuals};
 use foldfree::param::admm::layout::{FacePush, MuCountPush, ResidualPush};
 use foldfree::param::admm::vulkan::VulkanExecutor;
@@ -201,11 +202,23 @@ fn random_state(problem: &AdmmProblem, seed: u64) -> AdmmState {
     AdmmState { a, y, lambda }
 }
 
-/// The iterate after [`REAL_ITERS`] CPU iterations (energy's default μ, one Newton step) from
-/// the LSCM start on camel, and the `A` before the last of them.
-fn real_state(energy: Energy) -> &'static (AdmmState, Vec<[f64; 4]>) {
-    static MIPS: OnceLock<(AdmmState, Vec<[f64; 4]>)> = OnceLock::new();
-    static SD: OnceLock<(AdmmState, Vec<[f64; 4]>)> = OnceLock::new();
+/// The penalty factors the executor computes at an upload of `a`, as the device stores them.
+fn device_penalties(energy: Energy, p: &AdmmProblem, a: &[[f64; 4]]) -> Vec<f64> {
+    cpu::penalty_factors(energy, &p.weight, a)
+        .into_iter()
+        .map(r32)
+        .collect()
+}
+
+/// A real iterate: the state, the `A` before the last iteration, the penalty factors.
+type RealState = (AdmmState, Vec<[f64; 4]>, Vec<f64>);
+
+/// The iterate after [`REAL_ITERS`] CPU iterations (energy's default μ, one Newton step, the
+/// start's penalty factors as the executor computes them) from the LSCM start on camel, and the
+/// `A` before the last of them.
+fn real_state(energy: Energy) -> &'static RealState {
+    static MIPS: OnceLock<RealState> = OnceLock::new();
+    static SD: OnceLock<RealState> = OnceLock::new();
     let cell = match energy {
         Energy::Mips => &MIPS,
         Energy::SymmetricDirichlet => &SD,
@@ -215,12 +228,17 @@ fn real_state(energy: Energy) -> &'static (AdmmState, Vec<[f64; 4]>) {
         let p = &fx.problem;
         let mu = AdmmOptions::for_energy(energy).initial_mu_rel() / p.n_faces() as f64;
         let mut st = AdmmState::from_uv(p, &fx.mesh.faces, &fx.lscm);
+        let factor = device_penalties(energy, p, &st.a);
+        let pen = Penalty {
+            mu,
+            factor: &factor,
+        };
         let mut prev = st.a.clone();
         for _ in 0..REAL_ITERS {
             prev.clone_from(&st.a);
-            cpu::iteration(p, &mut st, energy, 1, mu);
+            cpu::iteration(p, &mut st, energy, 1, pen);
         }
-        (st, prev)
+        (st, prev, factor)
     })
 }
 
@@ -231,6 +249,17 @@ struct Case {
     problem: AdmmProblem,
     state: AdmmState,
     a_prev: Vec<[f64; 4]>,
+    /// Per-face penalty factors `m_f` (f32-representable).
+    penalty: Vec<f64>,
+}
+
+impl Case {
+    fn pen(&self, mu: f64) -> Penalty<'_> {
+        Penalty {
+            mu,
+            factor: &self.penalty,
+        }
+    }
 }
 
 /// A random iterate (seeded) on `fx`, with `A_prev` = A + uniform ±0.01.
@@ -243,11 +272,16 @@ fn random_case(fx: &Fixture, seed: u64) -> Case {
         .iter()
         .map(|a| a.map(|x| r32(x + 0.01 * rng.sym())))
         .collect();
+    // Unequal penalties on the two sides of most edges (log-uniform over two decades).
+    let penalty = (0..problem.n_faces())
+        .map(|_| r32(rng.log_uniform(0.1, 10.0)))
+        .collect();
     Case {
         label: format!("random {}", fx.name),
         problem,
         state,
         a_prev,
+        penalty,
     }
 }
 
@@ -262,12 +296,13 @@ fn cases(energy: Energy) -> Vec<Case> {
     {
         out.push(random_case(&load(name), 18 + i as u64));
     }
-    let (state, a_prev) = real_state(energy);
+    let (state, a_prev, penalty) = real_state(energy);
     out.push(Case {
         label: format!("camel after {REAL_ITERS} CPU iterations ({energy:?})"),
         problem: round_problem(&camel().problem),
         state: round_state(state),
         a_prev: round4(a_prev),
+        penalty: penalty.clone(),
     });
     out
 }
@@ -318,6 +353,12 @@ impl DeviceProblem {
     }
 }
 
+/// The case's penalty factors as the device stores them.
+fn penalty_buffer(ctx: &Context, c: &Case) -> Buffer {
+    let m: Vec<f32> = c.penalty.iter().map(|&m| m as f32).collect();
+    storage(ctx, "test.face_penalties", &m)
+}
+
 /// Builds the pipeline, binds `buffers` to bindings 0.., pushes `push` and runs one dispatch of
 /// `threads` threads; returns after the device finished.
 fn dispatch_once<P: Pod>(
@@ -360,6 +401,7 @@ fn gpu_face_newton(
     let y = storage(ctx, "test.y", &f32x4(&c.state.y));
     let l = storage(ctx, "test.lambda", &f32x4(&c.state.lambda));
     let a_prev = storage(ctx, "test.a_prev", &vec![[f32::NAN; 4]; nf]);
+    let penalty = penalty_buffer(ctx, c);
     let push = FacePush {
         mu,
         n_faces: nf as u32,
@@ -372,7 +414,7 @@ fn gpu_face_newton(
         ctx,
         "test.face_newton",
         shaders::ADMM_FACE_NEWTON,
-        &[&a, &y, &l, &dp.face_slots, &dp.weight, &a_prev],
+        &[&a, &y, &l, &dp.face_slots, &dp.weight, &a_prev, &penalty],
         &push,
         nf as u32,
     );
@@ -389,12 +431,13 @@ fn gpu_edge_project(ctx: &Context, c: &Case, mu: f32) -> Vec<[f64; 4]> {
     let a = storage(ctx, "test.a", &f32x4(&c.state.a));
     let y = storage(ctx, "test.y", &vec![[f32::NAN; 4]; ns]);
     let l = storage(ctx, "test.lambda", &f32x4(&c.state.lambda));
+    let penalty = penalty_buffer(ctx, c);
     let n_edges = (ns / 2) as u32;
     dispatch_once(
         ctx,
         "test.edge_project",
         shaders::ADMM_EDGE_PROJECT,
-        &[&a, &y, &l, &dp.slot_face, &dp.slot_dir],
+        &[&a, &y, &l, &dp.slot_face, &dp.slot_dir, &penalty],
         &MuCountPush {
             mu,
             n: n_edges,
@@ -412,11 +455,12 @@ fn gpu_dual_update(ctx: &Context, c: &Case, mu: f32) -> Vec<[f64; 4]> {
     let a = storage(ctx, "test.a", &f32x4(&c.state.a));
     let y = storage(ctx, "test.y", &f32x4(&c.state.y));
     let l = storage(ctx, "test.lambda", &f32x4(&c.state.lambda));
+    let penalty = penalty_buffer(ctx, c);
     dispatch_once(
         ctx,
         "test.dual_update",
         shaders::ADMM_DUAL_UPDATE,
-        &[&a, &y, &l, &dp.slot_face],
+        &[&a, &y, &l, &dp.slot_face, &penalty],
         &MuCountPush {
             mu,
             n: ns as u32,
@@ -438,6 +482,7 @@ fn gpu_residual(ctx: &Context, c: &Case, energy: Energy) -> Residuals {
     let a_prev = storage(ctx, "test.a_prev", &f32x4(&c.a_prev));
     let groups = nf.max(ns).div_ceil(64);
     let partials = storage(ctx, "test.partials", &vec![[f32::NAN; 4]; groups]);
+    let penalty = penalty_buffer(ctx, c);
     let push = ResidualPush {
         n_slots: ns as u32,
         n_faces: nf as u32,
@@ -447,7 +492,15 @@ fn gpu_residual(ctx: &Context, c: &Case, energy: Energy) -> Residuals {
         ctx,
         "test.residual",
         shaders::ADMM_RESIDUAL,
-        &[&a, &y, &a_prev, &dp.slot_face, &dp.weight, &partials],
+        &[
+            &a,
+            &y,
+            &a_prev,
+            &dp.slot_face,
+            &dp.weight,
+            &partials,
+            &penalty,
+        ],
         &push,
         nf.max(ns) as u32,
     );
@@ -467,13 +520,14 @@ fn gpu_residual(ctx: &Context, c: &Case, energy: Energy) -> Residuals {
 fn cpu_face_newton(c: &Case, energy: Energy, mu: f64, iters: u32) -> Vec<[f64; 4]> {
     (0..c.problem.n_faces())
         .map(|f| {
-            let (bbar, n) = cpu::face_target(&c.problem, &c.state, f, mu);
+            let mu_f = c.pen(mu).face(f);
+            let (bbar, n) = cpu::face_target(&c.problem, &c.state, f, mu_f);
             kernels::face_newton(
                 energy,
                 c.state.a[f],
                 bbar,
                 n,
-                mu,
+                mu_f,
                 c.problem.weight[f],
                 iters,
             )
@@ -485,7 +539,7 @@ fn cpu_edge_project(
     p: &AdmmProblem,
     a: &[[f64; 4]],
     lambda: &[[f64; 4]],
-    mu: f64,
+    pen: Penalty,
 ) -> Vec<[f64; 4]> {
     let mut y = vec![[0.0; 4]; p.n_slots()];
     for i in 0..p.n_slots() / 2 {
@@ -498,7 +552,8 @@ fn cpu_edge_project(
             &lambda[s2],
             &p.slot_dir[s1],
             &p.slot_dir[s2],
-            mu,
+            pen.face(f1),
+            pen.face(f2),
         );
     }
     y
@@ -509,10 +564,13 @@ fn cpu_dual_update(
     a: &[[f64; 4]],
     y: &[[f64; 4]],
     lambda: &[[f64; 4]],
-    mu: f64,
+    pen: Penalty,
 ) -> Vec<[f64; 4]> {
     (0..p.n_slots())
-        .map(|s| kernels::dual_update(&lambda[s], &y[s], &a[p.slot_face[s] as usize], mu))
+        .map(|s| {
+            let f = p.slot_face[s] as usize;
+            kernels::dual_update(&lambda[s], &y[s], &a[f], pen.face(f))
+        })
         .collect()
 }
 
@@ -623,15 +681,15 @@ fn check_closed_form(what: &str, gpu: &[[f64; 4]], cpu: &[[f64; 4]], scale: &[f6
 
 /// Operand scale of edge `i`'s projection: the largest entry of `A_f1, A_f2, Λ1/μ, Λ2/μ`
 /// (everything `Y1`, `Y2` are linear combinations of, with unit-bounded coefficients).
-fn edge_scales(p: &AdmmProblem, a: &[[f64; 4]], lambda: &[[f64; 4]], mu: f64) -> Vec<f64> {
+fn edge_scales(p: &AdmmProblem, a: &[[f64; 4]], lambda: &[[f64; 4]], pen: Penalty) -> Vec<f64> {
     (0..p.n_slots())
         .map(|s| {
             let (s1, s2) = (s & !1, s | 1);
             [
                 max_abs(&a[p.slot_face[s1] as usize]),
                 max_abs(&a[p.slot_face[s2] as usize]),
-                max_abs(&lambda[s1]) / mu,
-                max_abs(&lambda[s2]) / mu,
+                max_abs(&lambda[s1]) / pen.slot(p, s1),
+                max_abs(&lambda[s2]) / pen.slot(p, s2),
             ]
             .into_iter()
             .fold(f64::MIN_POSITIVE, f64::max)
@@ -639,10 +697,11 @@ fn edge_scales(p: &AdmmProblem, a: &[[f64; 4]], lambda: &[[f64; 4]], mu: f64) ->
         .collect()
 }
 
-/// Operand scale of slot `s`'s dual update `Λ + μ (Y − A)`: `max(|Λ|, μ|Y|, μ|A|)`.
-fn dual_scales(p: &AdmmProblem, st: &AdmmState, mu: f64) -> Vec<f64> {
+/// Operand scale of slot `s`'s dual update `Λ + μ_f (Y − A)`: `max(|Λ|, μ_f|Y|, μ_f|A|)`.
+fn dual_scales(p: &AdmmProblem, st: &AdmmState, pen: Penalty) -> Vec<f64> {
     (0..p.n_slots())
         .map(|s| {
+            let mu = pen.slot(p, s);
             max_abs(&st.lambda[s])
                 .max(mu * max_abs(&st.y[s]))
                 .max(mu * max_abs(&st.a[p.slot_face[s] as usize]))
@@ -814,8 +873,8 @@ fn edge_project_shader_matches_cpu_twin_elementwise() {
             for mu_rel in [100.0, 1000.0] {
                 let (mu32, mu) = mu_of(&c, mu_rel);
                 let gpu = gpu_edge_project(ctx, &c, mu32);
-                let cpu = cpu_edge_project(&c.problem, &c.state.a, &c.state.lambda, mu);
-                let scale = edge_scales(&c.problem, &c.state.a, &c.state.lambda, mu);
+                let cpu = cpu_edge_project(&c.problem, &c.state.a, &c.state.lambda, c.pen(mu));
+                let scale = edge_scales(&c.problem, &c.state.a, &c.state.lambda, c.pen(mu));
                 check_closed_form(
                     &format!("edge_project μ_rel {mu_rel} {}", c.label),
                     &gpu,
@@ -838,8 +897,14 @@ fn dual_update_shader_matches_cpu_twin_elementwise() {
             for mu_rel in [100.0, 1000.0] {
                 let (mu32, mu) = mu_of(&c, mu_rel);
                 let gpu = gpu_dual_update(ctx, &c, mu32);
-                let cpu = cpu_dual_update(&c.problem, &c.state.a, &c.state.y, &c.state.lambda, mu);
-                let scale = dual_scales(&c.problem, &c.state, mu);
+                let cpu = cpu_dual_update(
+                    &c.problem,
+                    &c.state.a,
+                    &c.state.y,
+                    &c.state.lambda,
+                    c.pen(mu),
+                );
+                let scale = dual_scales(&c.problem, &c.state, c.pen(mu));
                 check_closed_form(
                     &format!("dual_update μ_rel {mu_rel} {}", c.label),
                     &gpu,
@@ -858,7 +923,7 @@ fn residual_shader_sums_match_cpu_residuals() {
         for energy in ENERGIES {
             for c in cases(energy) {
                 let gpu = gpu_residual(ctx, &c, energy);
-                let cpu = cpu::residuals(&c.problem, &c.state, &c.a_prev, energy);
+                let cpu = cpu::residuals(&c.problem, &c.state, &c.a_prev, energy, &c.penalty);
                 check_residuals(
                     &format!("residual {energy:?} {}", c.label),
                     &gpu,
@@ -893,28 +958,34 @@ fn one_executor_iteration_matches_cpu_iteration() {
                     let g = exec.download().expect("download");
                     drop(exec);
 
+                    // The executor's own penalties: computed from the uploaded A, stored in f32.
+                    let factor = device_penalties(energy, &c.problem, &c.state.a);
+                    let pen = Penalty {
+                        mu,
+                        factor: &factor,
+                    };
                     let mut st = c.state.clone();
-                    cpu::iteration(&c.problem, &mut st, energy, iters, mu);
-                    let r_cpu = cpu::residuals(&c.problem, &st, &c.state.a, energy);
+                    cpu::iteration(&c.problem, &mut st, energy, iters, pen);
+                    let r_cpu = cpu::residuals(&c.problem, &st, &c.state.a, energy, &factor);
 
                     // Face step: GPU A vs the all-CPU iteration.
                     check_faces(&format!("{what} A"), &g.a, &st.a);
                     if c.problem.n_slots() > 0 {
                         // Edge and dual steps from the GPU's A (and the uploaded Λ, Y).
-                        let y = cpu_edge_project(&c.problem, &g.a, &c.state.lambda, mu);
-                        let scale = edge_scales(&c.problem, &g.a, &c.state.lambda, mu);
+                        let y = cpu_edge_project(&c.problem, &g.a, &c.state.lambda, pen);
+                        let scale = edge_scales(&c.problem, &g.a, &c.state.lambda, pen);
                         check_closed_form(&format!("{what} Y"), &g.y, &y, &scale);
-                        let lambda = cpu_dual_update(&c.problem, &g.a, &g.y, &c.state.lambda, mu);
+                        let lambda = cpu_dual_update(&c.problem, &g.a, &g.y, &c.state.lambda, pen);
                         let mid = AdmmState {
                             a: g.a.clone(),
                             y: g.y.clone(),
                             lambda: c.state.lambda.clone(),
                         };
-                        let scale = dual_scales(&c.problem, &mid, mu);
+                        let scale = dual_scales(&c.problem, &mid, pen);
                         check_closed_form(&format!("{what} Λ"), &g.lambda, &lambda, &scale);
                     }
                     // Reduction of the GPU's own state (A_prev = the uploaded A).
-                    let r_own = cpu::residuals(&c.problem, &g, &c.state.a, energy);
+                    let r_own = cpu::residuals(&c.problem, &g, &c.state.a, energy, &factor);
                     check_residuals(
                         &format!("{what} residuals of GPU state"),
                         &r_gpu,

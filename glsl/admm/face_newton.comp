@@ -1,10 +1,11 @@
 #version 450
 // ADMM face step (CPU twin: kernels::face_newton in src/param/admm/kernels.rs).
-// A_f ← argmin w_f E(A) + (nμ/2)‖A − B̄‖², B̄ = mean over the face's n slots of Y_t + Λ_t/μ,
+// A_f ← argmin w_f E(A) + (nμ_f/2)‖A − B̄‖², B̄ = mean over the face's n slots of Y_t + Λ_t/μ_f,
+// μ_f = μ m_f the face's penalty,
 // by projected Newton: H⁺ = H with negative eigenvalues clamped to 0 (analytic eigensystem),
 // p = −(w H⁺ + nμ I)⁻¹ ∇F, step min(1, 0.9 · largest flip-free step), Armijo backtracking.
 // Bindings: 0 A vec4[F] (rw), 1 Y vec4[S], 2 Λ vec4[S], 3 face_slots uvec4[F] (xyz; NO_SLOT pad),
-//           4 weight float[F], 5 A_prev vec4[F] (written when save_prev != 0).
+//           4 weight float[F], 5 A_prev vec4[F] (written when save_prev != 0), 6 penalty float[F].
 // One thread per face, workgroups of 64, 2-D grid (see grid.glsl).
 #extension GL_GOOGLE_include_directive : require
 // The layout must precede grid.glsl: glslang bakes gl_WorkGroupSize into global_index()
@@ -19,6 +20,7 @@ layout(std430, set = 0, binding = 2) readonly buffer Lbuf { vec4 L[]; };
 layout(std430, set = 0, binding = 3) readonly buffer Slots { uvec4 face_slots[]; };
 layout(std430, set = 0, binding = 4) readonly buffer Weights { float weight[]; };
 layout(std430, set = 0, binding = 5) writeonly buffer Aprev { vec4 A_prev[]; };
+layout(std430, set = 0, binding = 6) readonly buffer Penalty { float penalty[]; };
 
 layout(push_constant) uniform Push {
     float mu;
@@ -48,17 +50,18 @@ void main() {
     if (pc.save_prev != 0u) A_prev[f] = a;
 
     uvec4 sl = face_slots[f];
+    float mu_f = pc.mu * penalty[f];
     vec4 bbar = vec4(0.0);
     uint n = 0u;
     for (int k = 0; k < 3; ++k) {
         uint s = sl[k];
         if (s != NO_SLOT) {
-            bbar += Y[s] + L[s] / pc.mu;
+            bbar += Y[s] + L[s] / mu_f;
             n += 1u;
         }
     }
     float w = weight[f];
-    float nmu = float(n) * pc.mu;
+    float nmu = float(n) * mu_f;
     if (n > 0u) {
         bbar /= float(n);
     } else {

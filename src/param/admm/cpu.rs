@@ -20,6 +20,8 @@ pub struct CpuExecutor<'p> {
     energy: Energy,
     newton_iters: u32,
     state: AdmmState,
+    /// #F penalty factors `m_f` ([`penalty_factors`]): face `f`'s penalty is `μ m_f`.
+    penalty: Vec<f64>,
     accel: Option<Accelerator>,
 }
 
@@ -79,11 +81,13 @@ impl Accelerator {
 /// complement. So `w` alone determines the next iteration (the Douglas–Rachford form of this
 /// ADMM), and since `(Y, Λ/μ) ↦ w` is an isometry on such states, Anderson on `w` takes the
 /// same steps as on `(Y, Λ/μ)` over half the data.
-fn pack_state(state: &AdmmState, mu: f64, out: &mut Vec<f64>) {
+fn pack_state(problem: &AdmmProblem, state: &AdmmState, pen: Penalty, out: &mut Vec<f64>) {
     out.resize(state.y.len() * 4, 0.0);
     out.par_chunks_mut(4)
         .zip(state.y.par_iter().zip(state.lambda.par_iter()))
-        .for_each(|(w, (y, l))| {
+        .enumerate()
+        .for_each(|(s, (w, (y, l)))| {
+            let mu = pen.slot(problem, s);
             for i in 0..4 {
                 w[i] = y[i] - l[i] / mu;
             }
@@ -92,7 +96,7 @@ fn pack_state(state: &AdmmState, mu: f64, out: &mut Vec<f64>) {
 
 /// Inverse of [`pack_state`] for the edge state (`A` is left alone): `Y = P w`,
 /// `Λ = μ (Y − w)`.
-fn unpack_state(problem: &AdmmProblem, v: &[f64], mu: f64, state: &mut AdmmState) {
+fn unpack_state(problem: &AdmmProblem, v: &[f64], pen: Penalty, state: &mut AdmmState) {
     state
         .y
         .par_chunks_mut(2)
@@ -102,6 +106,7 @@ fn unpack_state(problem: &AdmmProblem, v: &[f64], mu: f64, state: &mut AdmmState
         .for_each(|(i, ((y, l), w))| {
             let w1: [f64; 4] = std::array::from_fn(|k| w[k]);
             let w2: [f64; 4] = std::array::from_fn(|k| w[4 + k]);
+            let (mu1, mu2) = (pen.slot(problem, 2 * i), pen.slot(problem, 2 * i + 1));
             let (y1, y2) = kernels::edge_project(
                 &w1,
                 &w2,
@@ -109,27 +114,34 @@ fn unpack_state(problem: &AdmmProblem, v: &[f64], mu: f64, state: &mut AdmmState
                 &[0.0; 4],
                 &problem.slot_dir[2 * i],
                 &problem.slot_dir[2 * i + 1],
-                mu,
+                mu1,
+                mu2,
             );
             y[0] = y1;
             y[1] = y2;
-            l[0] = std::array::from_fn(|k| mu * (y1[k] - w1[k]));
-            l[1] = std::array::from_fn(|k| mu * (y2[k] - w2[k]));
+            l[0] = std::array::from_fn(|k| mu1 * (y1[k] - w1[k]));
+            l[1] = std::array::from_fn(|k| mu2 * (y2[k] - w2[k]));
         });
 }
 
 /// `Σ_t ‖Y⁺_t − A⁺_ft‖² + ‖Y⁺_t − Y_t‖²`, with `Y` the last iteration's input.
-fn combined_residual(problem: &AdmmProblem, state: &AdmmState, y_in: &[[f64; 4]]) -> f64 {
+fn combined_residual(
+    problem: &AdmmProblem,
+    state: &AdmmState,
+    y_in: &[[f64; 4]],
+    pen: Penalty,
+) -> f64 {
     let ns = problem.n_slots();
     (0..ns.div_ceil(SUM_CHUNK))
         .into_par_iter()
         .map(|c| {
             let mut r = 0.0;
             for s in c * SUM_CHUNK..((c + 1) * SUM_CHUNK).min(ns) {
-                let a = &state.a[problem.slot_face[s] as usize];
-                let y = &state.y[s];
+                let f = problem.slot_face[s] as usize;
+                let (a, y) = (&state.a[f], &state.y[s]);
+                let m = pen.factor.get(f).copied().unwrap_or(1.0);
                 for i in 0..4 {
-                    r += (y[i] - a[i]).powi(2) + (y[i] - y_in[s][i]).powi(2);
+                    r += m * ((y[i] - a[i]).powi(2) + (y[i] - y_in[s][i]).powi(2));
                 }
             }
             r
@@ -151,6 +163,7 @@ impl<'p> CpuExecutor<'p> {
             energy,
             newton_iters,
             state,
+            penalty: Vec::new(),
             accel: None,
         }
     }
@@ -187,6 +200,10 @@ impl<'p> CpuExecutor<'p> {
     /// every one divides the cost of the acceleration (several passes over the whole edge state)
     /// by `k`.
     fn accelerated_block(&mut self, mu: f64, k: usize) {
+        let pen = Penalty {
+            mu,
+            factor: &self.penalty,
+        };
         let Some(acc) = self.accel.as_mut() else {
             for _ in 0..k {
                 iteration(
@@ -194,7 +211,7 @@ impl<'p> CpuExecutor<'p> {
                     &mut self.state,
                     self.energy,
                     self.newton_iters,
-                    mu,
+                    pen,
                 );
             }
             return;
@@ -207,7 +224,7 @@ impl<'p> CpuExecutor<'p> {
             acc.block = k;
         }
         if !acc.x_ready {
-            pack_state(&self.state, mu, &mut acc.x);
+            pack_state(self.problem, &self.state, pen, &mut acc.x);
         }
         for _ in 1..k {
             iteration(
@@ -215,7 +232,7 @@ impl<'p> CpuExecutor<'p> {
                 &mut self.state,
                 self.energy,
                 self.newton_iters,
-                mu,
+                pen,
             );
         }
         acc.y_last.clone_from(&self.state.y);
@@ -225,18 +242,18 @@ impl<'p> CpuExecutor<'p> {
             &mut self.state,
             self.energy,
             self.newton_iters,
-            mu,
+            pen,
         );
-        let r = combined_residual(self.problem, &self.state, &acc.y_last);
+        let r = combined_residual(self.problem, &self.state, &acc.y_last, pen);
         if acc.restart || r < acc.last_residual {
             acc.accepted += k;
             acc.restart = false;
             acc.last_residual = r;
             acc.fallback_a.clone_from(&self.state.a);
             std::mem::swap(&mut acc.fallback_a_prev, &mut acc.a_in);
-            pack_state(&self.state, mu, &mut acc.g);
+            pack_state(self.problem, &self.state, pen, &mut acc.g);
             acc.aa.step(&acc.x, &mut acc.g);
-            unpack_state(self.problem, &acc.g, mu, &mut self.state);
+            unpack_state(self.problem, &acc.g, pen, &mut self.state);
             std::mem::swap(&mut acc.x, &mut acc.g);
             acc.x_ready = true;
         } else {
@@ -245,7 +262,7 @@ impl<'p> CpuExecutor<'p> {
             // with a fresh history.
             acc.rejected += k;
             self.state.a.clone_from(&acc.fallback_a);
-            unpack_state(self.problem, acc.aa.last_plain(), mu, &mut self.state);
+            unpack_state(self.problem, acc.aa.last_plain(), pen, &mut self.state);
             acc.x.clear();
             acc.x.extend_from_slice(acc.aa.last_plain());
             acc.aa.reset();
@@ -255,7 +272,55 @@ impl<'p> CpuExecutor<'p> {
     }
 }
 
-/// Mean of `Y_t + Λ_t/μ` over the slots of face `f`, and the slot count.
+/// Face `f`'s penalty `μ_f = μ m_f`: the driver's `μ` and the executor's per-face factors
+/// ([`kernels::penalty_factor`]); an empty `factor` means `m_f = 1` (the uniform penalty).
+#[derive(Clone, Copy, Debug)]
+pub struct Penalty<'a> {
+    pub mu: f64,
+    pub factor: &'a [f64],
+}
+
+impl Penalty<'_> {
+    /// `μ_f`.
+    pub fn face(&self, f: usize) -> f64 {
+        self.factor.get(f).map_or(self.mu, |m| self.mu * m)
+    }
+
+    /// The penalty of slot `s` (its face's).
+    pub fn slot(&self, problem: &AdmmProblem, s: usize) -> f64 {
+        self.face(problem.slot_face[s] as usize)
+    }
+}
+
+/// Penalty factors `m_f` of every face for the iterate `a` ([`kernels::penalty_factor`];
+/// `weight` the faces' `w_f`), computed on the host whenever an iterate is uploaded (the
+/// start, a re-synchronisation) and fixed until the next upload, on both backends.
+///
+/// Why per face: the face step minimises `w_f E(A) + μ_f/2 Σ‖A − ·‖²`, and ADMM converges at a
+/// rate set by the ratio of the penalty to the curvature of the term it splits off (Giselsson &
+/// Boyd 2014, diagonal scaling of ADMM). One `μ` for faces whose curvature `w_f ∇²E` spans many
+/// orders of magnitude — the exponentially shrunk protrusions of a conformal map have
+/// `∇²MIPS ∝ 1/det A` up to 1e12 times the mean — leaves the stiff faces barely coupled to the
+/// consensus (their residual, relative to their size, never closes and the recovered map flips
+/// them: the μ-at-its-cap stalls of 24 of 61 corpus disks) while the soft ones are
+/// over-coupled. With `m_f ∝ w_f κ(A_f)` the ratio is the same on every face, so `μ·F` is a
+/// pure number independent of the mesh, its units and its map's scales; `m_f = 1` on a uniform
+/// mesh mapped isometrically, where this is the uniform penalty.
+///
+/// Why fixed: the curvature is the start map's. For MIPS from LSCM (the unconstrained
+/// minimiser of the same conformal energy) the start has the solution's local scales except
+/// around its folds. Penalties that follow the iterate change the fixed-point map under the
+/// iteration: measured, a refresh every 250 iterations (2× hysteresis) made the residual jump
+/// at every refresh and the per-face energy rise instead of converge.
+pub fn penalty_factors(energy: Energy, weight: &[f64], a: &[[f64; 4]]) -> Vec<f64> {
+    let nf = weight.len() as f64;
+    a.par_iter()
+        .zip(weight)
+        .map(|(a, w)| kernels::penalty_factor(energy, a, nf * w))
+        .collect()
+}
+
+/// Mean of `Y_t + Λ_t/μ_f` over the slots of face `f`, and the slot count.
 pub fn face_target(problem: &AdmmProblem, state: &AdmmState, f: usize, mu: f64) -> ([f64; 4], u32) {
     let mut b = [0.0; 4];
     let mut n = 0u32;
@@ -277,18 +342,18 @@ pub fn face_target(problem: &AdmmProblem, state: &AdmmState, f: usize, mu: f64) 
     (b, n)
 }
 
-/// One full iteration (face, edge, dual steps) on `state`, in place. Returns the previous `A`
-/// when `keep_previous` is set, for the dual residual.
+/// One full iteration (face, edge, dual steps) on `state`, in place.
 pub fn iteration(
     problem: &AdmmProblem,
     state: &mut AdmmState,
     energy: Energy,
     newton_iters: u32,
-    mu: f64,
+    pen: Penalty,
 ) {
     let new_a: Vec<[f64; 4]> = (0..problem.n_faces())
         .into_par_iter()
         .map(|f| {
+            let mu = pen.face(f);
             let (bbar, n) = face_target(problem, state, f, mu);
             kernels::face_newton(
                 energy,
@@ -317,24 +382,31 @@ pub fn iteration(
             &lambda[s2],
             &problem.slot_dir[s1],
             &problem.slot_dir[s2],
-            mu,
+            pen.face(f1),
+            pen.face(f2),
         );
         y[0] = y1;
         y[1] = y2;
     });
     let y = &state.y;
     state.lambda.par_iter_mut().enumerate().for_each(|(s, l)| {
-        *l = kernels::dual_update(l, &y[s], &a[problem.slot_face[s] as usize], mu);
+        let f = problem.slot_face[s] as usize;
+        *l = kernels::dual_update(l, &y[s], &a[f], pen.face(f));
     });
 }
 
 /// Residual sums of the current state against the `A` of the iteration before (twin of
-/// `glsl/admm/residual.comp`).
+/// `glsl/admm/residual.comp`), each slot's terms weighted by its face's penalty factor (empty
+/// `factor`: 1), i.e. measured in the metric the iteration uses: with `m_f ∝ w_f κ(A_f)`,
+/// `m_f ‖A_f‖²` is about the same on every face, so the relative residuals are area-weighted
+/// means of each face's *relative* mismatch — what decides whether the recovered map flips a
+/// face, whatever its size in the map.
 pub fn residuals(
     problem: &AdmmProblem,
     state: &AdmmState,
     a_prev: &[[f64; 4]],
     energy: Energy,
+    factor: &[f64],
 ) -> Residuals {
     // Fixed chunks summed in order: a rayon `reduce` would combine partial sums in an order that
     // depends on work stealing, and the driver's μ decisions compare these sums, so runs would
@@ -347,10 +419,11 @@ pub fn residuals(
             for s in c * SUM_CHUNK..((c + 1) * SUM_CHUNK).min(ns) {
                 let f = problem.slot_face[s] as usize;
                 let (a, y, ap) = (&state.a[f], &state.y[s], &a_prev[f]);
+                let m = factor.get(f).copied().unwrap_or(1.0);
                 for i in 0..4 {
-                    r[0] += (y[i] - a[i]).powi(2);
-                    r[1] += (a[i] - ap[i]).powi(2);
-                    r[2] += a[i] * a[i];
+                    r[0] += m * (y[i] - a[i]).powi(2);
+                    r[1] += m * (a[i] - ap[i]).powi(2);
+                    r[2] += m * a[i] * a[i];
                 }
             }
             r
@@ -380,6 +453,7 @@ impl Executor for CpuExecutor<'_> {
 
     fn upload(&mut self, state: &AdmmState) -> crate::Result<()> {
         self.state = state.clone();
+        self.penalty = penalty_factors(self.energy, &self.problem.weight, &self.state.a);
         if let Some(acc) = self.accel.as_mut() {
             acc.reset();
         }
@@ -412,15 +486,25 @@ impl Executor for CpuExecutor<'_> {
                 if i + 1 == n {
                     a_prev.clone_from(&self.state.a);
                 }
+                let pen = Penalty {
+                    mu,
+                    factor: &self.penalty,
+                };
                 iteration(
                     self.problem,
                     &mut self.state,
                     self.energy,
                     self.newton_iters,
-                    mu,
+                    pen,
                 );
             }
-            return Ok(residuals(self.problem, &self.state, &a_prev, self.energy));
+            return Ok(residuals(
+                self.problem,
+                &self.state,
+                &a_prev,
+                self.energy,
+                &self.penalty,
+            ));
         }
         let every = self.accel.as_ref().map_or(1, |a| a.every);
         let mut done = 0;
@@ -440,12 +524,17 @@ impl Executor for CpuExecutor<'_> {
             y: vec![[0.0; 4]; self.state.y.len()],
             lambda: vec![[0.0; 4]; self.state.lambda.len()],
         };
-        unpack_state(self.problem, acc.aa.last_plain(), mu, &mut plain);
+        let pen = Penalty {
+            mu,
+            factor: &self.penalty,
+        };
+        unpack_state(self.problem, acc.aa.last_plain(), pen, &mut plain);
         Ok(residuals(
             self.problem,
             &plain,
             &acc.fallback_a_prev,
             self.energy,
+            &self.penalty,
         ))
     }
 }
@@ -470,15 +559,20 @@ mod tests {
         normalize_area(&m, &mut uv, frames.area.iter().sum());
         let mut s = AdmmState::from_uv(&p, &m.faces, &uv);
         let mu = 300.0 / p.n_faces() as f64;
+        let factor = penalty_factors(Energy::SymmetricDirichlet, &p.weight, &s.a);
+        let pen = Penalty {
+            mu,
+            factor: &factor,
+        };
         for _ in 0..3 {
-            iteration(&p, &mut s, Energy::SymmetricDirichlet, 1, mu);
+            iteration(&p, &mut s, Energy::SymmetricDirichlet, 1, pen);
         }
         let mut w = Vec::new();
-        pack_state(&s, mu, &mut w);
+        pack_state(&p, &s, pen, &mut w);
         let mut back = s.clone();
         back.y.iter_mut().for_each(|y| *y = [9.0; 4]);
         back.lambda.iter_mut().for_each(|l| *l = [-9.0; 4]);
-        unpack_state(&p, &w, mu, &mut back);
+        unpack_state(&p, &w, pen, &mut back);
         let scale = s
             .lambda
             .iter()

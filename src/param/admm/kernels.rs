@@ -230,9 +230,10 @@ pub fn face_newton(
     a
 }
 
-/// Edge step twin of `glsl/admm/edge_project.comp`: projection of `Q_k = A_k − Λ_k/μ` onto the
-/// consensus constraint `Y1 ê1 = Y2 ê2` (ê unit): `r = Q1ê1 − Q2ê2`, `Y1 = Q1 − ½ r ê1ᵀ`,
-/// `Y2 = Q2 + ½ r ê2ᵀ`.
+/// Edge step twin of `glsl/admm/edge_project.comp`: projection of `Q_k = A_k − Λ_k/μ_k` onto
+/// the consensus constraint `Y1 ê1 = Y2 ê2` (ê unit) in the metric `μ1‖·‖² + μ2‖·‖²` of the two
+/// sides' penalties: `r = Q1ê1 − Q2ê2`, `Y1 = Q1 − μ2/(μ1+μ2) r ê1ᵀ`, `Y2 = Q2 + μ1/(μ1+μ2) r ê2ᵀ`
+/// (the side with the stiffer penalty moves less; equal penalties split `r` in halves).
 pub fn edge_project(
     a1: &[f64; 4],
     a2: &[f64; 4],
@@ -240,27 +241,66 @@ pub fn edge_project(
     l2: &[f64; 4],
     e1: &[f64; 2],
     e2: &[f64; 2],
-    mu: f64,
+    mu1: f64,
+    mu2: f64,
 ) -> ([f64; 4], [f64; 4]) {
-    let q1: [f64; 4] = std::array::from_fn(|i| a1[i] - l1[i] / mu);
-    let q2: [f64; 4] = std::array::from_fn(|i| a2[i] - l2[i] / mu);
+    let q1: [f64; 4] = std::array::from_fn(|i| a1[i] - l1[i] / mu1);
+    let q2: [f64; 4] = std::array::from_fn(|i| a2[i] - l2[i] / mu2);
     let r = [
         q1[0] * e1[0] + q1[1] * e1[1] - q2[0] * e2[0] - q2[1] * e2[1],
         q1[2] * e1[0] + q1[3] * e1[1] - q2[2] * e2[0] - q2[3] * e2[1],
     ];
+    let (t1, t2) = (mu2 / (mu1 + mu2), mu1 / (mu1 + mu2));
     let y1 = [
-        q1[0] - 0.5 * r[0] * e1[0],
-        q1[1] - 0.5 * r[0] * e1[1],
-        q1[2] - 0.5 * r[1] * e1[0],
-        q1[3] - 0.5 * r[1] * e1[1],
+        q1[0] - t1 * r[0] * e1[0],
+        q1[1] - t1 * r[0] * e1[1],
+        q1[2] - t1 * r[1] * e1[0],
+        q1[3] - t1 * r[1] * e1[1],
     ];
     let y2 = [
-        q2[0] + 0.5 * r[0] * e2[0],
-        q2[1] + 0.5 * r[0] * e2[1],
-        q2[2] + 0.5 * r[1] * e2[0],
-        q2[3] + 0.5 * r[1] * e2[1],
+        q2[0] + t2 * r[0] * e2[0],
+        q2[1] + t2 * r[0] * e2[1],
+        q2[2] + t2 * r[1] * e2[0],
+        q2[3] + t2 * r[1] * e2[1],
     ];
     (y1, y2)
+}
+
+/// Bounds of a face's penalty factor: with `μ·F` up to ~1e5 and factors in this range, `μ_f`,
+/// `Λ/μ_f` and `μ_f·‖A‖²` stay finite and normal in f32 on the device.
+pub const PENALTY_RANGE: (f64, f64) = (1e-12, 1e24);
+
+/// MIPS's curvature at `A` relative to a rotation: along the similarities `sR` (`det = s²`) its
+/// Hessian scales as `1/s²` (MIPS is scale-free, homogeneous of degree 0), so `1/det A`. Taken
+/// from the determinant, not from the Hessian's largest eigenvalue, so that a face's factor
+/// follows its size in the map and not its anisotropy (a nearly degenerate face would
+/// otherwise get the penalty of its own stiffest mode, and `m_f ‖A_f‖²` would no longer be
+/// bounded by the face's energy `‖A‖²/det A`).
+pub fn mips_relative_curvature(a: &[f64; 4]) -> f64 {
+    1.0 / energy::det(a)
+}
+
+/// Penalty factor of a face with start Jacobian `a` and `fw = F w_f` (its area over the mean
+/// face area): its penalty is `μ_f = μ · m_f` (see [`super::cpu::penalty_factors`] for why).
+///
+/// MIPS: `m_f = F w_f / det A_f`, the face's curvature relative to a unit face mapped
+/// isometrically. SD: `m_f = 1`, the uniform penalty — the start map is conformal, and SD's
+/// solution differs from it by orders of magnitude in scale where area has to move, so the
+/// start's curvature would mislead (measured: SD with penalties from the LSCM start's
+/// curvature, `(1 + 3/det²)/4`, locked the shrunk faces to the consensus and ran 8 of 8 sampled
+/// corpus disks to the iteration cap; with area weights alone, 5 of 8 stalled).
+pub fn penalty_factor(energy: Energy, a: &[f64; 4], fw: f64) -> f64 {
+    match energy {
+        Energy::SymmetricDirichlet => 1.0,
+        Energy::Mips => {
+            let m = fw * mips_relative_curvature(a);
+            if m.is_finite() {
+                m.clamp(PENALTY_RANGE.0, PENALTY_RANGE.1)
+            } else {
+                PENALTY_RANGE.1
+            }
+        }
+    }
 }
 
 /// Dual step twin of `glsl/admm/dual_update.comp`: `Λ += μ (Y − A)`.
@@ -354,6 +394,26 @@ mod tests {
     }
 
     #[test]
+    fn mips_penalty_is_the_curvature_scale_relative_to_a_unit_face() {
+        let rot = [0.6, -0.8, 0.8, 0.6];
+        assert!((penalty_factor(Energy::Mips, &rot, 1.0) - 1.0).abs() < 1e-12);
+        assert_eq!(penalty_factor(Energy::SymmetricDirichlet, &rot, 7.0), 1.0);
+        // MIPS's Hessian scales as 1/s² under A → sA, and so does the factor.
+        let s = 1e-3;
+        let small = rot.map(|x| s * x);
+        let (lam, _) = hessian_eigensystem(Energy::Mips, &small);
+        let (lam1, _) = hessian_eigensystem(Energy::Mips, &rot);
+        assert!((lam[1] * s * s - lam1[1]).abs() < 1e-6 * lam1[1]);
+        let k = penalty_factor(Energy::Mips, &small, 2.0);
+        assert!((k * s * s - 2.0).abs() < 1e-9, "{k}");
+        // Bounded for f32.
+        assert_eq!(
+            penalty_factor(Energy::Mips, &rot.map(|x| 1e-20 * x), 1.0),
+            PENALTY_RANGE.1
+        );
+    }
+
+    #[test]
     fn svd2_reconstructs() {
         for a in [
             [1.0, 0.2, -0.3, 0.9],
@@ -401,6 +461,7 @@ mod tests {
             &e1,
             &e2,
             10.0,
+            30.0,
         );
         let m1 = [y1[0] * e1[0] + y1[1] * e1[1], y1[2] * e1[0] + y1[3] * e1[1]];
         let m2 = [y2[0] * e2[0] + y2[1] * e2[1], y2[2] * e2[0] + y2[3] * e2[1]];

@@ -9,14 +9,18 @@
 //! Constraint: the edge maps to the same UV vector from both sides, `Y_e1 ê1 = Y_e2 ê2`, where
 //! `ê_k` is the unit edge vector (lower → higher vertex index) expressed in face `f_k`'s frame.
 //!
-//! One iteration (each step a GLSL kernel in `glsl/admm/` and a function in [`cpu`]):
-//! 1. face step: `A_f ← argmin w_f E(A) + μ/2 Σ_t ‖A − (Y_t + Λ_t/μ)‖²` by projected Newton
-//!    with a flip-proof line search (`E = +∞` for `det A ≤ 0`, so `det A_f > 0` always);
-//! 2. edge step: `Q_k = A_fk − Λ_k/μ`, `r = Q1ê1 − Q2ê2`, `Y1 = Q1 − ½ r ê1ᵀ`, `Y2 = Q2 + ½ r ê2ᵀ`;
-//! 3. dual step: `Λ_t += μ (Y_t − A_ft)`.
+//! One iteration (each step a GLSL kernel in `glsl/admm/` and a function in [`cpu`]), with
+//! face `f`'s penalty `μ_f = μ m_f`:
+//! 1. face step: `A_f ← argmin w_f E(A) + μ_f/2 Σ_t ‖A − (Y_t + Λ_t/μ_f)‖²` by projected
+//!    Newton with a flip-proof line search (`E = +∞` for `det A ≤ 0`, so `det A_f > 0` always);
+//! 2. edge step: `Q_k = A_fk − Λ_k/μ_k`, `r = Q1ê1 − Q2ê2`, `Y1 = Q1 − μ2/(μ1+μ2) r ê1ᵀ`,
+//!    `Y2 = Q2 + μ1/(μ1+μ2) r ê2ᵀ`;
+//! 3. dual step: `Λ_t += μ_f (Y_t − A_ft)`.
 //!
 //! Weights are `w_f = area_f / total area`, so `μ` is quoted as `μ_rel = μ · #faces` (with
-//! normalised weights the iterates depend on μ only through that product).
+//! normalised weights the iterates depend on μ only through that product). The per-face
+//! factors `m_f` scale each face's penalty to its curvature ([`cpu::penalty_factors`]: MIPS's
+//! `F w_f / det A_f` at the start map; 1 for SD).
 
 pub mod anderson;
 pub mod cpu;
@@ -137,9 +141,16 @@ pub struct AdmmState {
 }
 
 impl AdmmState {
-    /// A consistent start: `A_f` from the map `uv`, `Y = A`, `Λ = 0`. Faces the map flips (or
-    /// collapses) get the nearest similarity with positive determinant instead, so that every
-    /// `A_f` starts orientation-preserving; ADMM reconciles them.
+    /// A consistent start: `A_f` from the map `uv`, `Y = A`, `Λ = 0`. Faces the map flips,
+    /// collapses or leaves non-finite get the nearest orientation-preserving similarity at the
+    /// face's own area scale instead ([`orientation_preserving_similarity`]), so that every `A_f`
+    /// starts orientation-preserving; ADMM reconciles them.
+    ///
+    /// The test is relative to the face's own size (`det A > 1e-6 ‖A‖²/2`, i.e. `σ2/σ1` above
+    /// ~1e-6): that is where the device's f32 copy of `det A = ad − bc` could round to a wrong
+    /// sign. It is not relative to the map's mean scale: the exponentially shrunk protrusions
+    /// of a conformal map have faces 1e-6 of the mean and less, and replacing those by
+    /// mean-size similarities threw away the start map exactly where ADMM converges slowest.
     pub fn from_uv(problem: &AdmmProblem, faces: &[[u32; 3]], uv: &[[f64; 2]]) -> AdmmState {
         let mean_scale = {
             let mut s = 0.0;
@@ -162,8 +173,8 @@ impl AdmmState {
             .map(|f| {
                 let a = problem.jacobian(faces, uv, f);
                 let d = crate::param::energy::det(&a);
-                // 1e-6 relative: well above f32 resolution, so the device's rounded copy stays positive.
-                if d > 1e-6 * mean_scale * mean_scale && a.iter().all(|x| x.is_finite()) {
+                let n2: f64 = a.iter().map(|x| x * x).sum();
+                if d > 0.5e-6 * n2 && a.iter().all(|x| x.is_finite()) {
                     a
                 } else {
                     orientation_preserving_similarity(&a, mean_scale)
@@ -176,15 +187,24 @@ impl AdmmState {
     }
 }
 
-/// The conformal part `[p −q; q p]` of `A` (p = (a+d)/2, q = (c−b)/2), or `scale·I` when that
-/// part vanishes: the nearest similarity, which always has positive determinant.
+/// The nearest similarity to `A` with positive determinant at the face's own area scale:
+/// the rotation of `A`'s conformal part `[p −q; q p]` (p = (a+d)/2, q = (c−b)/2; the identity
+/// when that part vanishes) scaled to `√|det A|`, the scale at which the face keeps its area
+/// (its conformal part's own size when `A` is collapsed, `scale` when both vanish or are not
+/// finite): a folded face in a shrunk region stays at that region's size.
 fn orientation_preserving_similarity(a: &[f64; 4], scale: f64) -> [f64; 4] {
     let p = 0.5 * (a[0] + a[3]);
     let q = 0.5 * (a[2] - a[1]);
     let n = (p * p + q * q).sqrt();
-    if n > 1e-6 * scale && n.is_finite() {
-        [p, -q, q, p]
+    let (c, s) = if n > 0.0 && n.is_finite() {
+        (p / n, q / n)
     } else {
-        [scale, 0.0, 0.0, scale]
-    }
+        (1.0, 0.0)
+    };
+    let area_scale = crate::param::energy::det(a).abs().sqrt();
+    let r = [area_scale, n, scale]
+        .into_iter()
+        .find(|x| *x > 0.0 && x.is_finite())
+        .unwrap_or(1.0);
+    [r * c, -r * s, r * s, r * c]
 }

@@ -89,6 +89,10 @@ pub struct VulkanExecutor {
     y: Buffer,
     lambda: Buffer,
     partials: Buffer,
+    /// #F penalty factors `m_f`, written at every upload.
+    penalty: Buffer,
+    /// #F face weights `w_f` (for the penalty factors).
+    weights: Vec<f64>,
     kernels: Kernels,
     recorder: Recorder,
     profile: Option<(TimestampPool, KernelTimes)>,
@@ -225,6 +229,7 @@ impl VulkanExecutor {
             .map(|d| [d[0] as f32, d[1] as f32])
             .collect();
         let slot_dir = storage::<[f32; 2]>(ctx, "admm.slot_dirs", ns)?;
+        let penalty = storage::<f32>(ctx, "admm.face_penalties", nf)?;
         let groups = nf.max(ns).div_ceil(64).max(1);
         // Read back at every check: host-visible, so the read is never a queue operation.
         let partials = Buffer::with_desc(
@@ -241,45 +246,45 @@ impl VulkanExecutor {
             ctx,
             "admm.face_newton",
             shaders::ADMM_FACE_NEWTON,
-            6,
+            7,
         )?;
         let edge_pipe = ComputePipeline::from_shader::<MuCountPush>(
             ctx,
             "admm.edge_project",
             shaders::ADMM_EDGE_PROJECT,
-            5,
+            6,
         )?;
         let dual_pipe = ComputePipeline::from_shader::<MuCountPush>(
             ctx,
             "admm.dual_update",
             shaders::ADMM_DUAL_UPDATE,
-            4,
+            5,
         )?;
         let resid_pipe = ComputePipeline::from_shader::<ResidualPush>(
             ctx,
             "admm.residual",
             shaders::ADMM_RESIDUAL,
-            6,
+            7,
         )?;
         let face_set = DescriptorSet::new(
             &face_pipe,
             "admm.face_newton.set",
-            &[&a, &y, &lambda, &face_slots, &weight, &a_prev],
+            &[&a, &y, &lambda, &face_slots, &weight, &a_prev, &penalty],
         )?;
         let edge_set = DescriptorSet::new(
             &edge_pipe,
             "admm.edge_project.set",
-            &[&a, &y, &lambda, &slot_face, &slot_dir],
+            &[&a, &y, &lambda, &slot_face, &slot_dir, &penalty],
         )?;
         let dual_set = DescriptorSet::new(
             &dual_pipe,
             "admm.dual_update.set",
-            &[&a, &y, &lambda, &slot_face],
+            &[&a, &y, &lambda, &slot_face, &penalty],
         )?;
         let resid_set = DescriptorSet::new(
             &resid_pipe,
             "admm.residual.set",
-            &[&a, &y, &a_prev, &slot_face, &weight, &partials],
+            &[&a, &y, &a_prev, &slot_face, &weight, &partials, &penalty],
         )?;
         let recorder = Recorder::new(ctx, "admm.iterations")?;
         let profile = if profile {
@@ -316,6 +321,8 @@ impl VulkanExecutor {
             y,
             lambda,
             partials,
+            penalty,
+            weights: problem.weight.clone(),
             kernels: Kernels {
                 face: (face_pipe, face_set),
                 edge: (edge_pipe, edge_set),
@@ -488,9 +495,9 @@ impl VulkanExecutor {
     }
 
     /// Storage-buffer bytes one iteration reads and writes (face, edge and dual kernels; the
-    /// residual pass once per batch is not counted): face = A r/w, slots, weight, and Y, Λ of
-    /// each slot; edge = per slot A, Λ, face index, direction read and Y written; dual = per
-    /// slot A, Y, face index read and Λ read/written.
+    /// residual pass once per batch is not counted): face = A r/w, slots, weight, penalty, and
+    /// Y, Λ of each slot; edge = per slot A, Λ, face index, direction, penalty read and Y
+    /// written; dual = per slot A, Y, face index, penalty read and Λ read/written.
     pub fn bytes_per_iteration(&self) -> u64 {
         self.kernel_bytes().iter().sum()
     }
@@ -499,9 +506,9 @@ impl VulkanExecutor {
     /// dual_update.
     pub fn kernel_bytes(&self) -> [u64; 3] {
         let (f, s) = (u64::from(self.n_faces), u64::from(self.n_slots));
-        let face = f * (16 + 16 + 16 + 4) + s * 32;
-        let edge = s * (16 + 16 + 4 + 8 + 16);
-        let dual = s * (16 + 16 + 4 + 16 + 16);
+        let face = f * (16 + 16 + 16 + 4 + 4) + s * 32;
+        let edge = s * (16 + 16 + 4 + 8 + 16 + 4);
+        let dual = s * (16 + 16 + 4 + 16 + 16 + 4);
         [face, edge, dual]
     }
 
@@ -649,6 +656,12 @@ impl Executor for VulkanExecutor {
 
     fn upload(&mut self, state: &AdmmState) -> crate::Result<()> {
         let (a, y, lambda) = (self.a.clone(), self.y.clone(), self.lambda.clone());
+        let factors = super::cpu::penalty_factors(self.energy, &self.weights, &state.a);
+        let penalty = self.penalty.clone();
+        self.put(
+            &penalty,
+            &factors.iter().map(|&m| m as f32).collect::<Vec<_>>(),
+        )?;
         self.put(&a, &to_f32x4(&state.a))?;
         self.put(&y, &to_f32x4(&state.y))?;
         self.put(&lambda, &to_f32x4(&state.lambda))?;
