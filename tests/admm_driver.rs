@@ -19,6 +19,10 @@ struct Scripted<F: FnMut(usize, f64) -> (f64, f64, f64)> {
     checks: usize,
     /// μ·F passed to each batch.
     mu_seen: Vec<f64>,
+    /// The first download returns the iterate with every Jacobian scaled by this (a map whose
+    /// scales moved away from the uploaded one's).
+    scale_once: Option<f64>,
+    uploads: usize,
 }
 
 impl<F: FnMut(usize, f64) -> (f64, f64, f64)> Executor for Scripted<F> {
@@ -30,13 +34,20 @@ impl<F: FnMut(usize, f64) -> (f64, f64, f64)> Executor for Scripted<F> {
     }
     fn upload(&mut self, state: &AdmmState) -> foldfree::Result<()> {
         self.state = Some(state.clone());
+        self.uploads += 1;
         Ok(())
     }
     fn download(&mut self) -> foldfree::Result<AdmmState> {
-        Ok(self
+        let mut st = self
             .state
             .clone()
-            .expect("the driver uploads before it downloads"))
+            .expect("the driver uploads before it downloads");
+        if let Some(s) = self.scale_once.take() {
+            st.a.iter_mut()
+                .chain(st.y.iter_mut())
+                .for_each(|a| *a = a.map(|x| s * x));
+        }
+        Ok(st)
     }
     fn iterate(&mut self, _n: usize, mu: f64) -> foldfree::Result<Residuals> {
         let mu_rel = mu * self.nf;
@@ -67,6 +78,16 @@ fn run<F: FnMut(usize, f64) -> (f64, f64, f64)>(
     opts: &AdmmOptions,
     script: F,
 ) -> (admm::AdmmResult, Vec<f64>) {
+    let (r, exec) = run_scaled(opts, script, None);
+    (r, exec.mu_seen)
+}
+
+/// [`run`] whose executor's first download scales the map by `scale_once`.
+fn run_scaled<F: FnMut(usize, f64) -> (f64, f64, f64)>(
+    opts: &AdmmOptions,
+    script: F,
+    scale_once: Option<f64>,
+) -> (admm::AdmmResult, Scripted<F>) {
     let (m, p, uv) = grid();
     let mut exec = Scripted {
         script,
@@ -74,10 +95,42 @@ fn run<F: FnMut(usize, f64) -> (f64, f64, f64)>(
         nf: p.n_faces() as f64,
         checks: 0,
         mu_seen: Vec::new(),
+        scale_once,
+        uploads: 0,
     };
     let r =
         admm::solve(&p, &m.faces, &uv, None, opts, &mut exec, &mut |_| {}).expect("scripted run");
-    (r, exec.mu_seen)
+    (r, exec)
+}
+
+/// MIPS penalties are the start map's curvature (`∝ 1/det A`). When the stop test is met by a
+/// map whose scales moved away from the ones the penalties were computed for (here every face
+/// shrunk 4×, so every factor is 16× stale), the residuals were measured in the wrong metric:
+/// the run re-uploads that map (fresh penalties, the stop test starts over) and converges at
+/// the next stop test met with penalties that fit. SD's penalties are uniform: never stale.
+#[test]
+fn stale_penalties_are_refreshed_before_the_run_counts_as_converged() {
+    let mut opts = AdmmOptions::for_energy(Energy::Mips);
+    opts.max_iters = 40 * opts.check_every;
+    let calm = |_: usize, _: f64| (1e-7, 1e-7, 2.0);
+    let (r, exec) = run_scaled(&opts, calm, None);
+    assert!(r.converged());
+    assert_eq!(exec.uploads, 1);
+    let plain = r.iterations;
+
+    let (r, exec) = run_scaled(&opts, calm, Some(0.25));
+    assert!(r.converged(), "{}", r.stop_summary());
+    assert_eq!(exec.uploads, 2, "one refresh");
+    assert_eq!(
+        r.iterations,
+        plain + opts.energy_checks * opts.check_every,
+        "the stop test started over"
+    );
+
+    let opts = AdmmOptions::for_energy(Energy::SymmetricDirichlet);
+    let (r, exec) = run_scaled(&opts, calm, Some(0.25));
+    assert!(r.converged());
+    assert_eq!(exec.uploads, 1);
 }
 
 /// Residuals far under tolerance and an energy that oscillates: one calm check now and then (a

@@ -402,6 +402,19 @@ pub fn map_energy(
     (sum, flips)
 }
 
+/// Whether the penalty factors in use (`old`) no longer describe the map (`now`): more than 1 %
+/// of the faces have a factor off by more than 2× (a residual weight off by 2× changes that
+/// face's share of the residual by less than its tolerance's own slack of √2 in the norm; a
+/// few such faces cannot move the weighted sum, more than one in a hundred can).
+fn stale_penalties(old: &[f64], now: &[f64]) -> bool {
+    let off = old
+        .iter()
+        .zip(now)
+        .filter(|(o, n)| !(**n <= 2.0 * **o && **n >= 0.5 * **o))
+        .count();
+    off * 100 > old.len()
+}
+
 /// The best flip-free per-vertex map seen so far.
 struct Best {
     uv: Vec<[f64; 2]>,
@@ -494,6 +507,9 @@ pub fn solve(
 
     let state = AdmmState::from_uv(problem, faces, init_uv);
     exec.upload(&state)?;
+    // The penalty factors the executor derived from the uploaded iterate (it computes the same
+    // at every upload): the stop test checks that they still describe the map.
+    let mut factors = super::cpu::penalty_factors(opts.energy, &problem.weight, &state.a);
     let accelerating = opts.accel != Accel::None;
     exec.set_accel_active(accelerating && opts.aa_start() == 0);
 
@@ -603,8 +619,24 @@ pub fn solve(
             h.recovered_flips = Some(flips);
             h.recovered_energy = Some(e);
             best.offer(problem, faces, &uv, opts.energy);
+            let mut refreshed = false;
             if small && flips == 0 {
-                converged = true;
+                let synced = AdmmState::from_uv(problem, faces, &uv);
+                let now = super::cpu::penalty_factors(opts.energy, &problem.weight, &synced.a);
+                if stale_penalties(&factors, &now) {
+                    // The residuals met their tolerance in a metric the map has outgrown: a
+                    // face whose scale changed since the upload is weighted by its old
+                    // curvature, so its relative mismatch is under- (or over-) counted. Go on
+                    // from this consistent, flip-free map with penalties of its own scales (the
+                    // multipliers are kept: they do not depend on the penalty).
+                    let mut synced = synced;
+                    synced.lambda = st.lambda.clone();
+                    exec.upload(&synced)?;
+                    factors = now;
+                    refreshed = true;
+                } else {
+                    converged = true;
+                }
             } else if small && flips > 0 && can_raise {
                 // Residuals are small but the consensus is not yet tight enough for a flip-free
                 // recovery: tighten it.
@@ -612,10 +644,17 @@ pub fn solve(
             } else if small && flips > 0 {
                 stalled = true;
             }
-            if resync_due && flips == 0 {
+            if resync_due && flips == 0 && !refreshed {
                 let mut synced = AdmmState::from_uv(problem, faces, &uv);
                 synced.lambda = st.lambda;
+                factors = super::cpu::penalty_factors(opts.energy, &problem.weight, &synced.a);
                 exec.upload(&synced)?;
+            }
+            if refreshed {
+                // A new metric: the stop test starts over.
+                calm_checks = 0;
+                best_primal = f64::INFINITY;
+                checks_since_best = 0;
             }
             if resync_due {
                 since_resync = 0;
