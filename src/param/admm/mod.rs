@@ -143,7 +143,7 @@ pub struct AdmmState {
 impl AdmmState {
     /// A consistent start: `A_f` from the map `uv`, `Y = A`, `Λ = 0`. Faces the map flips,
     /// collapses or leaves non-finite get the nearest orientation-preserving similarity at the
-    /// face's own area scale instead ([`orientation_preserving_similarity`]), so that every `A_f`
+    /// face's own area scale instead (`orientation_preserving_similarity`), so that every `A_f`
     /// starts orientation-preserving; ADMM reconciles them.
     ///
     /// The test is relative to the face's own size (`det A > 1e-6 ‖A‖²/2`, i.e. `σ2/σ1` above
