@@ -403,9 +403,12 @@ pub fn map_energy(
 }
 
 /// Whether the penalty factors in use (`old`) no longer describe the map (`now`): more than 1 %
-/// of the faces have a factor off by more than 2× (a residual weight off by 2× changes that
-/// face's share of the residual by less than its tolerance's own slack of √2 in the norm; a
-/// few such faces cannot move the weighted sum, more than one in a hundred can).
+/// of the faces have a factor off by more than 2×. The 2× band is the smallest change that
+/// matters to the stop test (a weight within 2× misstates its face's share of the residual norm
+/// by at most √2, which the tolerance's own order of magnitude absorbs). The 1 % is a
+/// judgement, not derived: a handful of faces whose scale moved cannot shift an area-weighted
+/// sum, and each refresh costs at least the stop test's window. Measured on the corpus MIPS
+/// disks: refreshes on 15 of 61, and every one of them ended at a lower energy.
 fn stale_penalties(old: &[f64], now: &[f64]) -> bool {
     let off = old
         .iter()
