@@ -531,6 +531,10 @@ struct ParamArgs {
     /// square (a multiple of 4 texels) that holds the charts at this density.
     #[arg(long, conflicts_with = "resolution")]
     texel_density: Option<f64>,
+    /// Texture pages the charts may be packed into (atlas path): page k is the UV tile
+    /// [k, k+1] × [0, 1] (UDIM tile 1001 + k), each a texture of --resolution².
+    #[arg(long, default_value_t = 1)]
+    max_pages: u32,
     /// How strongly seams prefer curved regions (0 = shortest seams).
     #[arg(long, default_value_t = 1.0)]
     seam_curvature: f64,
@@ -1105,6 +1109,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         resolution: args.resolution,
         padding: args.padding,
         texels_per_unit: args.texel_density,
+        max_pages: args.max_pages,
     };
     job.pack.validate()?;
     if !(args.seam_curvature.is_finite() && args.seam_curvature >= 0.0) {
@@ -1183,11 +1188,12 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     );
     if let Some(a) = &r.atlas {
         eprintln!(
-            "  cut: {} chart(s), {} seam edges (length {:.4}), {} vt; packed at {}² with {} texels padding: efficiency {:.1}% of the area, {:.1}% of the texels",
+            "  cut: {} chart(s), {} seam edges (length {:.4}), {} vt; packed in {} page(s) of {}² with {} texels padding: efficiency {:.1}% of the area, {:.1}% of the texels",
             a.charts,
             a.seam_edges,
             a.seam_length,
             a.texture_coordinates,
+            a.pages,
             a.resolution,
             a.padding,
             100.0 * a.packing_efficiency,

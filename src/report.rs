@@ -97,10 +97,13 @@ pub struct AtlasReport {
     /// Genus of the input (summed over components), when defined.
     pub genus: Option<i64>,
     pub components: usize,
-    /// Σ chart UV area / area of the unit square.
+    /// Σ chart UV area / area of the pages used (each the unit square `[k, k+1] × [0, 1]`).
     pub packing_efficiency: f64,
-    /// Texels some chart touches / all texels, at `resolution` (xatlas's "utilization").
+    /// Texels some chart touches / all texels of the pages used, at `resolution` (xatlas's
+    /// "utilization").
     pub texel_coverage: f64,
+    /// Texture pages used (`--max-pages`; page `k` is UDIM tile 1001 + k).
+    pub pages: u32,
     /// Texture side in texels, and the empty texels kept between charts and to the border.
     pub resolution: u32,
     pub padding: u32,

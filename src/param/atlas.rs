@@ -219,6 +219,7 @@ pub(crate) fn run_atlas(
         components: topo.components,
         packing_efficiency: packing.efficiency,
         texel_coverage: packing.coverage,
+        pages: packing.pages,
         resolution: packing.resolution,
         padding: job.pack.padding,
         texels_per_unit: packing.texels_per_unit,

@@ -15,6 +15,12 @@
 //! occupancy, rotations, scale search); the bitmap rows are 64-bit words and a blocked
 //! position skips to the end of the blocking run.
 //!
+//! **Pages.** With `max_pages` above 1, a chart that fits no earlier page goes to the next one
+//! (up to `max_pages`), and the scale search targets the pages together: the atlas is page `k`
+//! in `[k, k+1] × [0, 1]` of UV space (the UDIM convention: tile 1001 + k), each page its own
+//! `resolution`² texture. A mesh whose charts fill one page uses one page: pages are used only
+//! where the charts are larger together at one page's scale bound.
+//!
 //! Two numbers say how full the result is, and they differ: the **efficiency** is Σ chart UV
 //! area / atlas area; the **texel coverage** is the share of texels some chart touches (what
 //! xatlas calls utilization), larger because edge texels count whole.
@@ -30,6 +36,8 @@ pub struct PackOptions {
     /// Texels per unit of 3D length: when set, the scale is this and the resolution is the
     /// smallest square (a multiple of 4) that holds the charts, instead of the reverse.
     pub texels_per_unit: Option<f64>,
+    /// Texture pages the charts may use (1: one texture).
+    pub max_pages: u32,
 }
 
 impl Default for PackOptions {
@@ -38,13 +46,21 @@ impl Default for PackOptions {
             resolution: 1024,
             padding: 2,
             texels_per_unit: None,
+            max_pages: 1,
         }
     }
 }
 
 impl PackOptions {
-    /// Checks the ranges (`resolution` 16..=16384, `padding` below a quarter of it).
+    /// Checks the ranges (`resolution` 16..=16384, `padding` below a quarter of it, `max_pages`
+    /// 1..=1000).
     pub fn validate(&self) -> crate::Result<()> {
+        if !(1..=1000).contains(&self.max_pages) {
+            return Err(crate::Error::Usage(format!(
+                "--max-pages {} is outside 1..=1000",
+                self.max_pages
+            )));
+        }
         if !(16..=16384).contains(&self.resolution) {
             return Err(crate::Error::Usage(format!(
                 "--resolution {} is outside 16..=16384",
@@ -79,9 +95,13 @@ pub struct Packing {
     pub texels_per_unit: f64,
     /// Texture side in texels (the requested one, or the one found for a texel density).
     pub resolution: u32,
+    /// Pages used (page `k` is `[k, k+1] × [0, 1]` in UV).
+    pub pages: u32,
     /// Per chart: lower-left texel of its footprint and its orientation (0–3: quarter turns
     /// of the minimum-area box; 4–7: of the smallest enclosing square, when they differ).
     pub placements: Vec<([u32; 2], u8)>,
+    /// Per chart: its page.
+    pub chart_pages: Vec<u32>,
 }
 
 /// One chart to pack: its vertices (indices into the shared UV array), its faces (triangles
@@ -93,8 +113,9 @@ pub struct ChartRef<'a> {
 }
 
 /// Packs the charts of `uv` in place into `[0, 1]²` (texel `(i, j)` covers
-/// `[i, i+1] × [j, j+1] / resolution`). Each vertex must belong to one chart. Fails when the
-/// charts cannot all get a footprint with their padding at this resolution (too many charts).
+/// `[i, i+1] × [j, j+1] / resolution`), or into pages `[k, k+1] × [0, 1]` with
+/// `opts.max_pages` > 1. Each vertex must belong to one chart. Fails when the charts cannot
+/// all get a footprint with their padding at this resolution (too many charts).
 pub fn pack(
     uv: &mut [[f64; 2]],
     charts: &[ChartRef],
@@ -164,7 +185,9 @@ pub fn pack(
             coverage: 0.0,
             texels_per_unit: 0.0,
             resolution: opts.resolution,
+            pages: 0,
             placements: Vec::new(),
+            chart_pages: Vec::new(),
         });
     }
     let (resolution, s_ok, a_ok) = match opts.texels_per_unit {
@@ -178,25 +201,35 @@ pub fn pack(
         }
     };
     let r = f64::from(resolution);
-    // Final UVs: rotate the scaled footprint, move it to its texel, divide by the resolution.
-    for ((c, o), (at, which)) in charts.iter().zip(&shapes).zip(&a_ok.placements) {
+    // Final UVs: rotate the scaled footprint, move it to its texel, divide by the resolution,
+    // shift to its page.
+    for (((c, o), (at, which)), &page) in charts
+        .iter()
+        .zip(&shapes)
+        .zip(&a_ok.placements)
+        .zip(&a_ok.pages)
+    {
         let turned: Vec<[f64; 2]> = o[*which as usize]
             .iter()
             .map(|p| [p[0] * s_ok, p[1] * s_ok])
             .collect();
         for (q, &v) in turned.iter().zip(c.vertices) {
             uv[v as usize] = [
-                (q[0] + 0.5 + f64::from(at[0])) / r,
+                (q[0] + 0.5 + f64::from(at[0])) / r + f64::from(page),
                 (q[1] + 0.5 + f64::from(at[1])) / r,
             ];
         }
     }
+    let pages = a_ok.pages.iter().copied().max().map_or(0, |p| p + 1);
+    let area = r * r * f64::from(pages.max(1));
     Ok(Packing {
-        efficiency: total_area * s_ok * s_ok / (r * r),
-        coverage: a_ok.covered as f64 / (r * r),
+        efficiency: total_area * s_ok * s_ok / area,
+        coverage: a_ok.covered as f64 / area,
         texels_per_unit: s_ok,
         resolution,
+        pages,
         placements: a_ok.placements,
+        chart_pages: a_ok.pages,
     })
 }
 
@@ -222,7 +255,8 @@ fn search_scale(
                 .fold(f64::INFINITY, f64::min)
         })
         .fold(0.0, f64::max);
-    let bound = (r / total_area.sqrt()).min(if widest > 0.0 && room > 0.0 {
+    let pages = f64::from(opts.max_pages.max(1));
+    let bound = (r * pages.sqrt() / total_area.sqrt()).min(if widest > 0.0 && room > 0.0 {
         room / widest
     } else {
         f64::INFINITY
@@ -247,8 +281,10 @@ fn search_scale(
     }
     let Some((mut s_ok, mut a_ok)) = found else {
         return Err(crate::Error::Usage(format!(
-            "{} charts do not fit a {}² texture with {} texels of padding; raise --resolution",
+            "{} charts do not fit {} page(s) of {}² texels with {} texels of padding; raise \
+             --resolution or --max-pages",
             shapes.len(),
+            opts.max_pages,
             opts.resolution,
             opts.padding
         )));
@@ -289,7 +325,8 @@ fn search_resolution(
         )
     };
     let round4 = |x: f64| ((x / 4.0).ceil() as u32).saturating_mul(4);
-    let mut lo = round4((total_area.sqrt() * density).max(16.0)).min(MAX);
+    let pages = f64::from(opts.max_pages.max(1));
+    let mut lo = round4((total_area.sqrt() * density / pages.sqrt()).max(16.0)).min(MAX);
     let mut found = None;
     let mut hi = lo;
     loop {
@@ -326,6 +363,8 @@ fn search_resolution(
 /// A successful placement of every chart at one scale.
 struct Attempt {
     placements: Vec<([u32; 2], u8)>,
+    /// Per chart, its page.
+    pages: Vec<u32>,
     covered: u64,
 }
 
@@ -354,31 +393,45 @@ fn attempt(
         .collect();
     let mut order: Vec<usize> = (0..shapes.len()).collect();
     order.sort_by(|&a, &b| masks[b][0].count.cmp(&masks[a][0].count).then(a.cmp(&b)));
-    let mut atlas = Bitmap::new(n, n);
+    let mut atlas: Vec<Bitmap> = vec![Bitmap::new(n, n)];
     let mut placements = vec![([0u32; 2], 0u8); shapes.len()];
+    let mut pages = vec![0u32; shapes.len()];
     let mut covered = 0u64;
     for &i in &order {
-        let mut chosen: Option<(usize, usize, u8)> = None;
-        for rot in 0..masks[i].len() as u8 {
-            let m = &masks[i][rot as usize];
-            let grown = m.grown(pad);
-            let top_limit = chosen.map(|(x, y, r)| (y + masks[i][r as usize].h, x));
-            if let Some((x, y)) = atlas.first_fit(&grown, top_limit.map(|t| t.0), m.h) {
-                let key = (y + m.h, x);
-                if top_limit.map_or(true, |t| key < t) {
-                    chosen = Some((x, y, rot));
+        // The first page (opening a new one while allowed) where some orientation fits.
+        let mut placed = None;
+        for page in 0..opts.max_pages.max(1) as usize {
+            if page == atlas.len() {
+                atlas.push(Bitmap::new(n, n));
+            }
+            let mut chosen: Option<(usize, usize, u8)> = None;
+            for rot in 0..masks[i].len() as u8 {
+                let m = &masks[i][rot as usize];
+                let grown = m.grown(pad);
+                let top_limit = chosen.map(|(x, y, r)| (y + masks[i][r as usize].h, x));
+                if let Some((x, y)) = atlas[page].first_fit(&grown, top_limit.map(|t| t.0), m.h) {
+                    let key = (y + m.h, x);
+                    if top_limit.map_or(true, |t| key < t) {
+                        chosen = Some((x, y, rot));
+                    }
                 }
             }
+            if let Some(c) = chosen {
+                placed = Some((page, c));
+                break;
+            }
         }
-        let (x, y, rot) = chosen?;
+        let (page, (x, y, rot)) = placed?;
         let m = &masks[i][rot as usize];
         // The grown footprint sits at (x, y); the chart's own is `pad` texels in.
-        atlas.set(m, x + pad, y + pad);
+        atlas[page].set(m, x + pad, y + pad);
         covered += m.count as u64;
         placements[i] = ([(x + pad) as u32, (y + pad) as u32], rot);
+        pages[i] = page as u32;
     }
     Some(Attempt {
         placements,
+        pages,
         covered,
     })
 }
@@ -883,6 +936,7 @@ mod tests {
             resolution: 256,
             padding: 2,
             texels_per_unit: None,
+            max_pages: 1,
         };
         let p = pack(&mut uv, &charts, &opts).expect("packs");
         let n = 256.0;
@@ -925,6 +979,63 @@ mod tests {
             }
         }
         assert!(p.efficiency > 0.6 && p.efficiency < p.coverage, "{p:?}");
+    }
+
+    /// Four equal squares with four pages allowed: one per page at about twice the texel
+    /// density of one page holding all four; each chart inside its page's tile `[k, k+1]`,
+    /// counter-clockwise; with one page allowed, the old single texture.
+    #[test]
+    fn pages_hold_what_one_texture_cannot_at_that_density() {
+        let mut uv0 = Vec::new();
+        let mut faces = Vec::new();
+        let mut verts = Vec::new();
+        for i in 0..4u32 {
+            let (p, f) = rect(4 * i, 1.0, 1.0, 0.1 * i as f64);
+            uv0.extend(p);
+            faces.push(f);
+            verts.push((4 * i..4 * i + 4).collect::<Vec<u32>>());
+        }
+        let charts: Vec<ChartRef> = (0..4)
+            .map(|i| ChartRef {
+                vertices: &verts[i],
+                faces: &faces[i],
+                area_3d: 1.0,
+            })
+            .collect();
+        let run = |max_pages| {
+            let mut uv = uv0.clone();
+            let opts = PackOptions {
+                resolution: 64,
+                max_pages,
+                ..PackOptions::default()
+            };
+            (pack(&mut uv, &charts, &opts).expect("packs"), uv)
+        };
+        let (one, uv1) = run(1);
+        assert_eq!((one.pages, one.chart_pages.clone()), (1, vec![0; 4]));
+        assert!(uv1.iter().all(|p| (0.0..=1.0).contains(&p[0])));
+        let (four, uv4) = run(4);
+        assert_eq!(four.pages, 4, "{four:?}");
+        assert!(
+            four.texels_per_unit > 1.8 * one.texels_per_unit,
+            "{four:?} vs {one:?}"
+        );
+        assert!(four.efficiency > 0.8, "{four:?}");
+        for (c, f) in faces.iter().enumerate() {
+            let k = f64::from(four.chart_pages[c]);
+            for t in f {
+                let q = t.map(|v| uv4[v as usize]);
+                assert!(q
+                    .iter()
+                    .all(|p| p[0] > k && p[0] < k + 1.0 && p[1] > 0.0 && p[1] < 1.0));
+                let signed = (q[1][0] - q[0][0]) * (q[2][1] - q[0][1])
+                    - (q[2][0] - q[0][0]) * (q[1][1] - q[0][1]);
+                assert!(signed > 0.0, "chart {c} was mirrored");
+            }
+        }
+        let mut used = four.chart_pages.clone();
+        used.sort();
+        assert_eq!(used, vec![0, 1, 2, 3]);
     }
 
     /// A single square fills the texture up to its padding.
@@ -990,6 +1101,7 @@ mod tests {
             resolution: 16,
             padding: 2,
             texels_per_unit: None,
+            max_pages: 1,
         };
         assert!(pack(&mut uv, &charts, &opts).is_err());
     }
