@@ -435,12 +435,18 @@ enum BackendArg {
 
 #[derive(clap::Args)]
 struct ParamArgs {
-    /// Input surface: OBJ, PLY, OFF or STL by extension (triangles or polygons; polygons are
-    /// fan-triangulated; STL corners at equal positions are welded).
+    /// Input surface: OBJ, PLY, OFF, STL or glTF (.gltf, .glb) by extension (triangles or
+    /// polygons; polygons are fan-triangulated; STL corners, and a glTF primitive's vertices, at
+    /// equal positions are welded).
     input: PathBuf,
-    /// Output OBJ: the input's v and f order, plus one vt per vertex.
+    /// Output OBJ (the input's v and f order, plus one vt per vertex), or for a glTF input a
+    /// .glb or .gltf (+ .bin beside it): the input document with a new TEXCOORD set.
     #[arg(short, long)]
     output: PathBuf,
+    /// glTF output: the TEXCOORD_n set the map is written to (default: the next free one of
+    /// each primitive; a set that exists, or would leave a gap, is refused).
+    #[arg(long, value_name = "N")]
+    uv_set: Option<u32>,
     /// Start map. Default: lscm with the ADMM solver, tutte otherwise.
     #[arg(long, value_enum)]
     init: Option<InitArg>,
@@ -1069,6 +1075,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     admm.stop = Some(stop);
     let mut job = ParamJob::new(&args.input, &args.output);
     job.report = args.report.clone();
+    job.uv_set = args.uv_set;
     job.images = foldfree::viz::ImageOutputs {
         layout_svg: args.svg.clone(),
         layout_png: args.png.clone(),
