@@ -47,7 +47,7 @@ enum Command {
     Param(Box<ParamArgs>),
     /// List the Vulkan devices and which one would be used.
     Devices,
-    /// Render a UV-mapped OBJ (with `vt`) textured with a checkerboard through its UVs, to PNG
+    /// Render a UV-mapped OBJ (with `vt`) or glTF (a TEXCOORD set) textured with a checkerboard through its UVs, to PNG
     /// (offscreen Vulkan graphics).
     Render(RenderArgs),
     /// Approximate a triangle mesh by at most K planar polygons (Hu & Zhang 2017).
@@ -699,8 +699,13 @@ fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// Input OBJ with texture coordinates (`vt`), e.g. the output of `foldfree param`.
+    /// Input OBJ with texture coordinates (`vt`) or glTF (.glb, .gltf) with a TEXCOORD set,
+    /// e.g. the output of `foldfree param`.
     input: PathBuf,
+    /// glTF input: the TEXCOORD_n set the checker is drawn through (default: the highest set
+    /// every primitive has, the one `foldfree param` adds).
+    #[arg(long, value_name = "N")]
+    uv_set: Option<u32>,
     /// Output PNG.
     #[arg(short, long)]
     output: PathBuf,
@@ -770,12 +775,12 @@ fn surface_corners(path: &std::path::Path, max_elements: usize) -> foldfree::Res
 
 fn run_render(args: RenderArgs) -> foldfree::Result<()> {
     use foldfree::gpu::{render_checker, Context, ContextDesc, RenderDesc};
-    use foldfree::viz::render::{encode_rgba_png, read_obj_with_uv};
+    use foldfree::viz::render::{encode_rgba_png, read_with_uv};
     let mut outputs = Outputs::new();
     foldfree::vol::tetgen::tet_input(&mut outputs, &args.input);
     outputs.output(&args.output, "picture", &["png"])?;
     let (positions, uvs, indices) = match args.shade {
-        ShadeArg::Checker => read_obj_with_uv(&args.input, args.max_elements)?.corners(),
+        ShadeArg::Checker => read_with_uv(&args.input, args.max_elements, args.uv_set)?.corners(),
         ShadeArg::Normals => surface_corners(&args.input, args.max_elements)?,
     };
     if indices.len() / 3 > args.max_elements {

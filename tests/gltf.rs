@@ -47,55 +47,9 @@ fn obj(name: &str) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
     (m.positions, m.faces)
 }
 
-/// A sphere: an octahedron subdivided `levels` times, projected to the unit sphere (closed,
-/// genus 0, vertices shared between triangles — so atlas seams split glTF vertices).
-fn sphere(levels: usize) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-    let mut p: Vec<[f64; 3]> = vec![
-        [1.0, 0.0, 0.0],
-        [-1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-    ];
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 2, 4],
-        [2, 1, 4],
-        [1, 3, 4],
-        [3, 0, 4],
-        [2, 0, 5],
-        [1, 2, 5],
-        [3, 1, 5],
-        [0, 3, 5],
-    ];
-    for _ in 0..levels {
-        let mut mid = std::collections::HashMap::new();
-        let mut next = Vec::new();
-        for t in &f {
-            let mut m = [0u32; 3];
-            for k in 0..3 {
-                let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
-                m[k] = *mid.entry((a, b)).or_insert_with(|| {
-                    let (pa, pb) = (p[a as usize], p[b as usize]);
-                    let c = [0, 1, 2].map(|d| (pa[d] + pb[d]) / 2.0);
-                    let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-                    p.push(c.map(|x| x / l));
-                    (p.len() - 1) as u32
-                });
-            }
-            next.push([t[0], m[0], m[2]]);
-            next.push([m[0], t[1], m[1]]);
-            next.push([m[2], m[1], t[2]]);
-            next.push([m[0], m[1], m[2]]);
-        }
-        f = next;
-    }
-    (p, f)
-}
-
 /// The sphere's faces whose centroid has z > −0.3: a curved disk.
 fn cap() -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-    let (p, f) = sphere(3);
+    let (p, f) = glb::sphere(3);
     let f: Vec<[u32; 3]> = f
         .into_iter()
         .filter(|t| t.iter().map(|&v| p[v as usize][2]).sum::<f64>() > -0.9)
@@ -342,6 +296,7 @@ fn validate_with_khronos(files: &[&Path]) {
         .args(files)
         .output()
         .expect("run ci/gltf_validate.sh");
+    eprintln!("{}", String::from_utf8_lossy(&out.stdout));
     check_ok(&out, "the Khronos glTF validator");
 }
 
@@ -436,7 +391,7 @@ fn flat_shaded_primitive_is_welded_into_one_disk() {
 #[test]
 fn closed_mesh_atlas_splits_vertices_on_seams_and_writes_gltf_with_bin() {
     let dir = TempDir::new("gltf-atlas");
-    let (p, f) = sphere(2);
+    let (p, f) = glb::sphere(2);
     let prim = Prim::smooth(&p, &f);
     let input = dir.join("sphere.glb");
     fs::write(&input, glb::glb(std::slice::from_ref(&prim))).unwrap();

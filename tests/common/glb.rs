@@ -76,6 +76,52 @@ impl Prim {
     }
 }
 
+/// A sphere: an octahedron subdivided `levels` times, projected to the unit sphere (closed,
+/// genus 0, vertices shared between triangles — so atlas seams split glTF vertices).
+pub fn sphere(levels: usize) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    let mut p: Vec<[f64; 3]> = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let mut f: Vec<[u32; 3]> = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    for _ in 0..levels {
+        let mut mid = std::collections::HashMap::new();
+        let mut next = Vec::new();
+        for t in &f {
+            let mut m = [0u32; 3];
+            for k in 0..3 {
+                let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+                m[k] = *mid.entry((a, b)).or_insert_with(|| {
+                    let (pa, pb) = (p[a as usize], p[b as usize]);
+                    let c = [0, 1, 2].map(|d| (pa[d] + pb[d]) / 2.0);
+                    let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+                    p.push(c.map(|x| x / l));
+                    (p.len() - 1) as u32
+                });
+            }
+            next.push([t[0], m[0], m[2]]);
+            next.push([m[0], t[1], m[1]]);
+            next.push([m[2], m[1], t[2]]);
+            next.push([m[0], m[1], m[2]]);
+        }
+        f = next;
+    }
+    (p, f)
+}
+
 fn bounds(positions: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
