@@ -88,9 +88,9 @@ pub fn parse_gltf(
 ) -> Result<GltfScene, MeshError> {
     let (json_bytes, bin, binary) = split_container(bytes, file)?;
     let json: serde_json::Value = serde_json::from_slice(json_bytes)
-        .map_err(|e| located(file, "JSON", format!("not valid JSON: {e}")))?;
+        .map_err(|e| at_path(file, format!("not valid JSON: {e}")))?;
     let root: gltf::json::Root = serde_json::from_value(json.clone())
-        .map_err(|e| located(file, "JSON", format!("not a glTF 2.0 document: {e}")))?;
+        .map_err(|e| at_path(file, format!("not a glTF 2.0 document: {e}")))?;
     let doc = gltf::Document::from_json(root).map_err(|e| match e {
         gltf::Error::Validation(errors) => {
             let (path, why) = &errors[0];
