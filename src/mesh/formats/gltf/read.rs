@@ -91,6 +91,7 @@ pub fn parse_gltf(
         .map_err(|e| at_path(file, format!("not valid JSON: {e}")))?;
     let root: gltf::json::Root = serde_json::from_value(json.clone())
         .map_err(|e| at_path(file, format!("not a glTF 2.0 document: {e}")))?;
+    check_position_indices(&root, file)?;
     let doc = gltf::Document::from_json(root).map_err(|e| match e {
         gltf::Error::Validation(errors) => {
             let (path, why) = &errors[0];
@@ -239,6 +240,31 @@ fn split_container<'a>(
     }
     let json = json.ok_or_else(|| short(12, "no JSON chunk first"))?;
     Ok((json, bin, true))
+}
+
+/// `gltf-json` 1.4.1's validation indexes `accessors` with a primitive's POSITION before it
+/// checks that index (a panic on a file whose POSITION names a missing accessor): refused here
+/// first, with the error and path the validation would give.
+fn check_position_indices(root: &gltf::json::Root, file: &Path) -> Result<(), MeshError> {
+    use gltf::json::validation::Checked;
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(i) = prim.attributes.get(&Checked::Valid(Semantic::Positions)) {
+                if i.value() >= root.accessors.len() {
+                    return Err(located(
+                        file,
+                        format!("meshes[{m}].primitives[{p}].attributes.POSITION"),
+                        format!(
+                            "accessor {} does not exist ({} accessors)",
+                            i.value(),
+                            root.accessors.len()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Each buffer's bytes: the GLB BIN chunk, a base64 data URI or an external file.
