@@ -86,9 +86,9 @@ pub fn parse_gltf(
     file: &Path,
     external: &mut dyn FnMut(&str) -> Result<Vec<u8>, String>,
 ) -> Result<GltfScene, MeshError> {
-    let (json_bytes, bin, binary) = split_container(bytes, file)?;
-    let json: serde_json::Value = serde_json::from_slice(json_bytes)
-        .map_err(|e| at_path(file, format!("not valid JSON: {e}")))?;
+    let Container { json, bin, binary } = split_container(bytes, file)?;
+    let json: serde_json::Value =
+        serde_json::from_slice(json).map_err(|e| at_path(file, format!("not valid JSON: {e}")))?;
     let root: gltf::json::Root = serde_json::from_value(json.clone())
         .map_err(|e| at_path(file, format!("not a glTF 2.0 document: {e}")))?;
     check_position_indices(&root, file)?;
@@ -181,14 +181,24 @@ impl GltfScene {
     }
 }
 
+/// The parts of a glTF file.
+struct Container<'a> {
+    json: &'a [u8],
+    /// A `.glb`'s BIN chunk.
+    bin: Option<&'a [u8]>,
+    /// Whether the file is a `.glb`.
+    binary: bool,
+}
+
 /// The JSON bytes and the BIN chunk of a `.glb`, or the whole file as JSON. Every length is
 /// checked against the bytes there are.
-fn split_container<'a>(
-    bytes: &'a [u8],
-    file: &Path,
-) -> Result<(&'a [u8], Option<&'a [u8]>, bool), MeshError> {
+fn split_container<'a>(bytes: &'a [u8], file: &Path) -> Result<Container<'a>, MeshError> {
     if !bytes.starts_with(GLB_MAGIC) {
-        return Ok((bytes, None, false));
+        return Ok(Container {
+            json: bytes,
+            bin: None,
+            binary: false,
+        });
     }
     let word = |at: usize| -> Option<u32> {
         let b = bytes.get(at..at.checked_add(4)?)?;
@@ -239,7 +249,11 @@ fn split_container<'a>(
         at = end;
     }
     let json = json.ok_or_else(|| short(12, "no JSON chunk first"))?;
-    Ok((json, bin, true))
+    Ok(Container {
+        json,
+        bin,
+        binary: true,
+    })
 }
 
 /// `gltf-json` 1.4.1's validation indexes `accessors` with a primitive's POSITION before it

@@ -139,7 +139,7 @@ pub fn write_gltf(
                 let (mut bytes, size) = scene.packed(index, at)?;
                 for &gv in &split.extra {
                     let s = gv as usize * size;
-                    bytes.extend_from_slice(&bytes[s..s + size].to_vec());
+                    bytes.extend_from_within(s..s + size);
                 }
                 let mut acc = json
                     .get("accessors")
