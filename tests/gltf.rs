@@ -14,9 +14,12 @@ use serde_json::Value;
 
 #[path = "common/glb.rs"]
 mod glb;
+#[path = "common/run.rs"]
+mod run;
 #[path = "common/tempdir.rs"]
 mod tempdir;
 use glb::{Prim, ReadPrim};
+use run::check_ok;
 use tempdir::TempDir;
 
 fn data(name: &str) -> PathBuf {
@@ -30,16 +33,6 @@ fn foldfree(args: &[&Path]) -> std::process::Output {
         .args(args)
         .output()
         .expect("run foldfree")
-}
-
-fn check_ok(out: &std::process::Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed ({}):\nstdout: {}\nstderr: {}",
-        out.status,
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 fn obj(name: &str) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
@@ -285,6 +278,26 @@ fn assert_flip_free_in_gltf_convention(out: &ReadPrim, set: usize) -> usize {
     n
 }
 
+/// Writes `prim` as `in.glb` in `dir`, runs `foldfree param in.glb -o out.glb --report r.json`
+/// with `args`, and returns the output's path and the report.
+fn map_glb(dir: &TempDir, prim: &Prim, args: &[&str]) -> (PathBuf, Value) {
+    let input = dir.join("in.glb");
+    fs::write(&input, glb::glb(std::slice::from_ref(prim))).unwrap();
+    let (out, report) = (dir.join("out.glb"), dir.join("r.json"));
+    let mut all = vec![
+        Path::new("param"),
+        &input,
+        Path::new("-o"),
+        &out,
+        Path::new("--report"),
+        &report,
+    ];
+    all.extend(args.iter().map(Path::new));
+    check_ok(&foldfree(&all), "param in.glb");
+    let r = serde_json::from_slice(&fs::read(&report).unwrap()).unwrap();
+    (out, r)
+}
+
 fn validate_with_khronos(files: &[&Path]) {
     if std::env::var("FOLDFREE_GLTF_VALIDATOR").as_deref() != Ok("1") {
         eprintln!("Khronos glTF validator: skipped (set FOLDFREE_GLTF_VALIDATOR=1)");
@@ -307,24 +320,7 @@ fn disk_glb_round_trip_keeps_attributes_and_adds_a_flipped_v_set() {
     let dir = TempDir::new("gltf-disk");
     let (p, f) = cap();
     let prim = Prim::smooth(&p, &f);
-    let input = dir.join("cap.glb");
-    fs::write(&input, glb::glb(std::slice::from_ref(&prim))).unwrap();
-    let out = dir.join("cap_uv.glb");
-    let report = dir.join("r.json");
-    let run = foldfree(&[
-        Path::new("param"),
-        &input,
-        Path::new("-o"),
-        &out,
-        Path::new("--report"),
-        &report,
-        Path::new("--init"),
-        Path::new("tutte"),
-        Path::new("--solver"),
-        Path::new("none"),
-    ]);
-    check_ok(&run, "param cap.glb");
-    let r: Value = serde_json::from_slice(&fs::read(&report).unwrap()).unwrap();
+    let (out, r) = map_glb(&dir, &prim, &["--init", "tutte", "--solver", "none"]);
     assert_eq!(r["faces"], f.len(), "every triangle read");
     assert!(r["atlas"].is_null(), "a disk: no atlas");
     let bytes = fs::read(&out).unwrap();
@@ -353,20 +349,7 @@ fn flat_shaded_primitive_is_welded_into_one_disk() {
     let dir = TempDir::new("gltf-flat");
     let (p, f) = obj("square_grid_10x10.obj");
     let prim = Prim::flat(&p, &f);
-    let input = dir.join("flat.glb");
-    fs::write(&input, glb::glb(std::slice::from_ref(&prim))).unwrap();
-    let out = dir.join("flat_uv.glb");
-    let report = dir.join("r.json");
-    let run = foldfree(&[
-        Path::new("param"),
-        &input,
-        Path::new("-o"),
-        &out,
-        Path::new("--report"),
-        &report,
-    ]);
-    check_ok(&run, "param flat.glb");
-    let r: Value = serde_json::from_slice(&fs::read(&report).unwrap()).unwrap();
+    let (out, r) = map_glb(&dir, &prim, &[]);
     assert_eq!(
         r["vertices"],
         p.len(),
@@ -430,29 +413,25 @@ fn uv_set_that_exists_or_leaves_a_gap_is_refused_before_any_work() {
     let input = dir.join("grid.glb");
     fs::write(&input, glb::glb(&[Prim::smooth(&p, &f)])).unwrap();
     let out = dir.join("out.glb");
-    for (set, says) in [("0", "already has TEXCOORD_0"), ("2", "would leave a gap")] {
-        let run = foldfree(&[
+    let with_set = |set: &str| {
+        let set = Path::new(set);
+        foldfree(&[
             Path::new("param"),
             &input,
             Path::new("-o"),
             &out,
             Path::new("--uv-set"),
-            Path::new(set),
-        ]);
+            set,
+        ])
+    };
+    for (set, says) in [("0", "already has TEXCOORD_0"), ("2", "would leave a gap")] {
+        let run = with_set(set);
         let err = String::from_utf8_lossy(&run.stderr);
         assert_eq!(run.status.code(), Some(2), "--uv-set {set}: {err}");
         assert!(err.contains(says), "--uv-set {set}: {err}");
         assert!(!out.exists());
     }
-    let run = foldfree(&[
-        Path::new("param"),
-        &input,
-        Path::new("-o"),
-        &out,
-        Path::new("--uv-set"),
-        Path::new("1"),
-    ]);
-    check_ok(&run, "--uv-set 1");
+    check_ok(&with_set("1"), "--uv-set 1");
     // A glTF output needs a glTF input.
     let run = foldfree(&[
         Path::new("param"),

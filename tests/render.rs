@@ -13,6 +13,9 @@ use std::process::Command;
 
 use foldfree::gpu::{render_checker, RenderDesc, BACKGROUND};
 
+#[path = "common/run.rs"]
+mod run;
+use run::check_ok;
 #[path = "common/tempdir.rs"]
 mod tempdir;
 use tempdir::TempDir;
@@ -33,16 +36,6 @@ fn foldfree(args: &[&str]) -> std::process::Output {
         .args(args)
         .output()
         .expect("run foldfree")
-}
-
-fn check_ok(out: &std::process::Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed ({}):\nstdout: {}\nstderr: {}",
-        out.status,
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 /// Success, or a run that stopped at its iteration cap and wrote its best map (exit 3).

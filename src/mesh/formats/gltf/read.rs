@@ -494,92 +494,8 @@ fn build_mesh(
                 return Err(bad("POSITION must be VEC3 FLOAT".into()));
             }
             let n = positions.count;
-            let mut texcoord_sets = Vec::new();
-            for (semantic, acc) in p.attributes() {
-                let at = format!("{path}.attributes.{}", semantic.to_string());
-                let el = Elements::new(&acc, buffers, &at).map_err(|e| at_path(file, e))?;
-                if el.count != n {
-                    return Err(located(
-                        file,
-                        &at,
-                        format!("{} elements, but POSITION has {n}", el.count),
-                    ));
-                }
-                if let Semantic::TexCoords(s) = semantic {
-                    texcoord_sets.push(s);
-                }
-            }
-            texcoord_sets.sort_unstable();
-            for (t, target) in p.morph_targets().enumerate() {
-                for (name, acc) in [
-                    ("POSITION", target.positions()),
-                    ("NORMAL", target.normals()),
-                    ("TANGENT", target.tangents()),
-                ] {
-                    let Some(acc) = acc else { continue };
-                    let at = format!("{path}.targets[{t}].{name}");
-                    let el = Elements::new(&acc, buffers, &at).map_err(|e| at_path(file, e))?;
-                    if el.count != n {
-                        return Err(located(
-                            file,
-                            &at,
-                            format!("{} elements, but POSITION has {n}", el.count),
-                        ));
-                    }
-                }
-            }
-            let triangles = match p.indices() {
-                Some(acc) => {
-                    let at = format!("{path}.indices");
-                    let el = Elements::new(&acc, buffers, &at).map_err(|e| at_path(file, e))?;
-                    if el.dims != 1
-                        || !matches!(el.kind, DataType::U8 | DataType::U16 | DataType::U32)
-                    {
-                        return Err(located(
-                            file,
-                            &at,
-                            "indices must be SCALAR UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT",
-                        ));
-                    }
-                    if el.count % 3 != 0 {
-                        return Err(located(
-                            file,
-                            &at,
-                            format!("{} indices, not a multiple of 3", el.count),
-                        ));
-                    }
-                    let mut tris = Vec::with_capacity(el.count / 3);
-                    for t in 0..el.count / 3 {
-                        let mut tri = [0u32; 3];
-                        for k in 0..3 {
-                            let v = el.index(3 * t + k);
-                            if v >= n as u64 {
-                                return Err(located(
-                                    file,
-                                    &at,
-                                    format!(
-                                        "triangle {t} refers to vertex {v}, but there are only \
-                                         {n} vertices"
-                                    ),
-                                ));
-                            }
-                            tri[k] = v as u32;
-                        }
-                        tris.push(tri);
-                    }
-                    tris
-                }
-                None => {
-                    if n % 3 != 0 {
-                        return Err(bad(format!(
-                            "{n} vertices without indices, not a multiple of 3"
-                        )));
-                    }
-                    (0..n as u32 / 3)
-                        .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
-                        .collect()
-                }
-            };
+            let texcoord_sets = check_vertex_accessors(&p, buffers, &path, n, file)?;
+            let triangles = triangles(&p, buffers, &path, n, file)?;
             // Weld by exactly equal position (−0 and +0 are one position).
             let base = u32::try_from(mesh.positions.len())
                 .ok()
@@ -618,6 +534,111 @@ fn build_mesh(
         });
     }
     Ok((mesh, prims))
+}
+
+/// Every attribute and morph-target accessor of primitive `p` (at JSON `path`) is in bounds
+/// and has the POSITION count `n`; returns the `n` of its `TEXCOORD_n` sets, ascending.
+fn check_vertex_accessors(
+    p: &gltf::Primitive<'_>,
+    buffers: &[Vec<u8>],
+    path: &str,
+    n: usize,
+    file: &Path,
+) -> Result<Vec<u32>, MeshError> {
+    let check = |acc: &gltf::Accessor<'_>, at: String| -> Result<(), MeshError> {
+        let el = Elements::new(acc, buffers, &at).map_err(|e| at_path(file, e))?;
+        if el.count != n {
+            return Err(located(
+                file,
+                &at,
+                format!("{} elements, but POSITION has {n}", el.count),
+            ));
+        }
+        Ok(())
+    };
+    let mut texcoord_sets = Vec::new();
+    for (semantic, acc) in p.attributes() {
+        check(&acc, format!("{path}.attributes.{}", semantic.to_string()))?;
+        if let Semantic::TexCoords(s) = semantic {
+            texcoord_sets.push(s);
+        }
+    }
+    texcoord_sets.sort_unstable();
+    for (t, target) in p.morph_targets().enumerate() {
+        for (name, acc) in [
+            ("POSITION", target.positions()),
+            ("NORMAL", target.normals()),
+            ("TANGENT", target.tangents()),
+        ] {
+            if let Some(acc) = acc {
+                check(&acc, format!("{path}.targets[{t}].{name}"))?;
+            }
+        }
+    }
+    Ok(texcoord_sets)
+}
+
+/// Primitive `p`'s triangles as vertex indices below `n`: its `indices` (unsigned integer
+/// scalars, a multiple of 3, each checked) or, without them, every 3 vertices.
+fn triangles(
+    p: &gltf::Primitive<'_>,
+    buffers: &[Vec<u8>],
+    path: &str,
+    n: usize,
+    file: &Path,
+) -> Result<Vec<[u32; 3]>, MeshError> {
+    Ok(match p.indices() {
+        Some(acc) => {
+            let at = format!("{path}.indices");
+            let el = Elements::new(&acc, buffers, &at).map_err(|e| at_path(file, e))?;
+            if el.dims != 1 || !matches!(el.kind, DataType::U8 | DataType::U16 | DataType::U32) {
+                return Err(located(
+                    file,
+                    &at,
+                    "indices must be SCALAR UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT",
+                ));
+            }
+            if el.count % 3 != 0 {
+                return Err(located(
+                    file,
+                    &at,
+                    format!("{} indices, not a multiple of 3", el.count),
+                ));
+            }
+            let mut tris = Vec::with_capacity(el.count / 3);
+            for t in 0..el.count / 3 {
+                let mut tri = [0u32; 3];
+                for k in 0..3 {
+                    let v = el.index(3 * t + k);
+                    if v >= n as u64 {
+                        return Err(located(
+                            file,
+                            &at,
+                            format!(
+                                "triangle {t} refers to vertex {v}, but there are only \
+                                 {n} vertices"
+                            ),
+                        ));
+                    }
+                    tri[k] = v as u32;
+                }
+                tris.push(tri);
+            }
+            tris
+        }
+        None => {
+            if n % 3 != 0 {
+                return Err(located(
+                    file,
+                    path,
+                    format!("{n} vertices without indices, not a multiple of 3"),
+                ));
+            }
+            (0..n as u32 / 3)
+                .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+                .collect()
+        }
+    })
 }
 
 /// A `Read` error whose reason already starts with its JSON path.
