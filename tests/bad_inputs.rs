@@ -258,6 +258,10 @@ const CASES: &[Case] = &[
         "cannot read: not valid JSON: EOF while parsing a list at line 2 column 0",
     ),
     bad(
+        "gltf_degenerate_triangle_second_primitive.gltf",
+        "meshes[0].primitives[1] triangle 0: face 2 is degenerate (area 0.000e0",
+    ),
+    bad(
         "glb_truncated.glb",
         "cannot read: byte 8: GLB: the header says 574 bytes, the file has 554",
     ),

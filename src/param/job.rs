@@ -244,13 +244,10 @@ fn load(
         let (m, topo, report) = mesh::load(&job.input, &job.validate)?;
         return Ok((m, topo, report, None));
     }
-    let max = job.validate.max_faces.unwrap_or(usize::MAX);
-    let scene = gltf::read_gltf(&job.input, max)?;
+    let (scene, topo, report) = mesh::validate::load_gltf(&job.input, &job.validate)?;
     scene
         .uv_sets(job.uv_set)
         .map_err(|e| Error::Usage(format!("{}: {e}", job.input.display())))?;
-    let (report, topo) =
-        mesh::validate::validate_with_topology(&scene.mesh, &job.input, &job.validate)?;
     Ok((scene.mesh.clone(), topo, report, Some(scene)))
 }
 

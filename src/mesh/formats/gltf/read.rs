@@ -165,6 +165,48 @@ impl GltfScene {
         ))
     }
 
+    /// The primitive and triangle of face `face` of [`GltfScene::mesh`], as
+    /// `meshes[m].primitives[p] triangle t`.
+    pub fn face_place(&self, face: usize) -> Option<String> {
+        let k = self
+            .primitives
+            .partition_point(|p| p.first_face <= face)
+            .checked_sub(1)?;
+        let p = &self.primitives[k];
+        let t = face - p.first_face;
+        (t < p.triangles.len()).then(|| format!("{} triangle {t}", p.path()))
+    }
+
+    /// A validation error of [`GltfScene::mesh`] that names a face, with the glTF primitive
+    /// and triangle appended (the merged mesh's face numbers mean nothing in the file); other
+    /// errors as they are.
+    pub fn locate(&self, e: MeshError) -> MeshError {
+        let face = match &e {
+            MeshError::Degenerate { face, .. }
+            | MeshError::RepeatedVertex { face, .. }
+            | MeshError::DuplicateFace { face, .. } => *face,
+            MeshError::InconsistentOrientation { f1, .. } => *f1 as usize,
+            _ => return e,
+        };
+        let Some(place) = self.face_place(face) else {
+            return e;
+        };
+        let (file, text) = match &e {
+            MeshError::Degenerate { file, .. }
+            | MeshError::RepeatedVertex { file, .. }
+            | MeshError::DuplicateFace { file, .. }
+            | MeshError::InconsistentOrientation { file, .. } => (file.clone(), e.to_string()),
+            _ => return e,
+        };
+        let prefix = format!("{}: ", file.display());
+        let what = text.strip_prefix(&prefix).unwrap_or(&text);
+        MeshError::InPlace {
+            place,
+            what: what.to_string(),
+            file,
+        }
+    }
+
     /// Raw bytes of accessor `index`, element by element (tightly packed), and its element size.
     pub(super) fn packed(&self, index: usize, at: &str) -> Result<(Vec<u8>, usize), String> {
         let acc = self
