@@ -13,6 +13,8 @@ pub struct Prim {
     pub uv0: Vec<[f32; 2]>,
     /// `None`: a non-indexed primitive (every 3 vertices a triangle).
     pub indices: Option<Vec<u32>>,
+    /// The POSITION displacements of one morph target, if any.
+    pub target: Option<Vec<[f32; 3]>>,
 }
 
 impl Prim {
@@ -49,6 +51,7 @@ impl Prim {
                 })
                 .collect(),
             indices: Some(faces.iter().flatten().copied().collect()),
+            target: None,
         }
     }
 
@@ -157,14 +160,18 @@ pub fn glb(prims: &[Prim]) -> Vec<u8> {
     };
     let floats = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
     let mut primitives = Vec::new();
-    for p in prims {
+    let bounds = |v: &[[f32; 3]]| {
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for q in &p.positions {
+        for q in v {
             for d in 0..3 {
                 lo[d] = lo[d].min(q[d]);
                 hi[d] = hi[d].max(q[d]);
             }
         }
+        (lo, hi)
+    };
+    for p in prims {
+        let (lo, hi) = bounds(&p.positions);
         let n = p.positions.len();
         let pos = add(
             &mut bin,
@@ -188,6 +195,16 @@ pub fn glb(prims: &[Prim]) -> Vec<u8> {
             "attributes": {"POSITION": pos, "NORMAL": nor, "TEXCOORD_0": uv},
             "mode": 4,
         });
+        if let Some(t) = &p.target {
+            let (lo, hi) = bounds(t);
+            let d = add(
+                &mut bin,
+                floats(t.as_flattened()),
+                34962,
+                json!({"componentType": 5126, "count": n, "type": "VEC3", "min": lo, "max": hi}),
+            );
+            prim["targets"] = json!([{"POSITION": d}]);
+        }
         if let Some(ix) = &p.indices {
             let i = add(
                 &mut bin,
@@ -245,6 +262,8 @@ pub struct ReadPrim {
     /// Every TEXCOORD set, by index.
     pub uvs: Vec<Vec<[f32; 2]>>,
     pub indices: Vec<u32>,
+    /// The first morph target's POSITION displacements (empty without one).
+    pub target: Vec<[f32; 3]>,
 }
 
 /// Every primitive of every mesh of a `.glb` or `.gltf` (`bin`: the `.bin` of a `.gltf`).
@@ -272,7 +291,14 @@ pub fn read_back(main: &[u8], bin: Option<&[u8]>) -> (serde_json::Value, Vec<Rea
             while let Some(t) = r.read_tex_coords(uvs.len() as u32) {
                 uvs.push(t.into_f32().collect());
             }
+            let target = r
+                .read_morph_targets()
+                .next()
+                .and_then(|(p, _, _)| p)
+                .map(|p| p.collect())
+                .unwrap_or_default();
             out.push(ReadPrim {
+                target,
                 normals: r.read_normals().map(|x| x.collect()).unwrap_or_default(),
                 uvs,
                 indices: r
