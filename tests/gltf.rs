@@ -425,6 +425,15 @@ fn closed_mesh_atlas_splits_vertices_on_seams_and_writes_gltf_with_bin() {
     let (_, prims) = glb::read_back(&fs::read(&again).unwrap(), None);
     assert_eq!(prims[0].uvs.len(), 3);
     assert_eq!(assert_flip_free_in_gltf_convention(&prims[0], 2), f.len());
+    // A .bin that an input reads is an input too: an output .gltf whose .bin would replace it
+    // is refused, and nothing is written.
+    let copy = dir.join("copy.gltf");
+    fs::copy(&out, &copy).unwrap();
+    let run = foldfree(&[Path::new("param"), &copy, Path::new("-o"), &out]);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{err}");
+    assert!(err.contains("refusing to overwrite the input"), "{err}");
+    assert_eq!(fs::read(&bin_path).unwrap(), bin, "the input .bin is kept");
 }
 
 #[test]

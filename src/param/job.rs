@@ -140,6 +140,9 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     }
     job.images.plan(&mut outputs)?;
     let (file_mesh, topo, vreport, scene) = load(job)?;
+    for bin in scene.iter().flat_map(|s| &s.external) {
+        outputs.late_input(bin)?;
+    }
     let pinched = topo.nonmanifold_vertices.len();
     let split = (pinched > 0).then(|| mesh::topology::split_pinched(&file_mesh, &topo));
     let topo = match &split {

@@ -28,6 +28,8 @@ pub struct GltfScene {
     pub(super) json: serde_json::Value,
     /// Each buffer's bytes, at least its `byteLength` long.
     pub(super) buffers: Vec<Vec<u8>>,
+    /// The external buffer files that were read (inputs of the run too).
+    pub external: Vec<std::path::PathBuf>,
 }
 
 /// Where a run of [`GltfScene::mesh`]'s faces came from.
@@ -66,17 +68,22 @@ pub fn read_gltf(path: &Path, max_faces: usize) -> Result<GltfScene, MeshError> 
         .unwrap_or(Path::new("."))
         .to_path_buf();
     let mut budget = crate::files::byte_limit(max_faces).saturating_sub(bytes.len() as u64);
+    let mut files = Vec::new();
     let mut external = |uri: &str| -> Result<Vec<u8>, String> {
         let name = Path::new(uri);
         if uri.contains(':') || name.is_absolute() {
             return Err(format!("URI {uri:?} is not a relative file name"));
         }
-        let data = crate::files::read_bounded(&folder.join(name), budget, "the input's limit")
+        let file = folder.join(name);
+        let data = crate::files::read_bounded(&file, budget, "the input's limit")
             .map_err(|e| format!("external buffer {uri:?}: {e}"))?;
         budget = budget.saturating_sub(data.len() as u64);
+        files.push(file);
         Ok(data)
     };
-    parse_gltf(&bytes, path, &mut external)
+    let mut scene = parse_gltf(&bytes, path, &mut external)?;
+    scene.external = files;
+    Ok(scene)
 }
 
 /// Parses a glTF file in memory; `external` returns the bytes of a buffer's relative URI (or
@@ -112,6 +119,7 @@ pub fn parse_gltf(
         doc,
         json,
         buffers,
+        external: Vec::new(),
     })
 }
 
