@@ -193,7 +193,7 @@ impl GltfScene {
             MeshError::Degenerate { face, .. }
             | MeshError::RepeatedVertex { face, .. }
             | MeshError::DuplicateFace { face, .. } => *face,
-            MeshError::InconsistentOrientation { f1, .. } => *f1 as usize,
+            MeshError::InconsistentOrientation { f1, .. } => *f1,
             _ => return e,
         };
         let Some(place) = self.face_place(face) else {
