@@ -47,7 +47,7 @@ enum Command {
     Param(Box<ParamArgs>),
     /// List the Vulkan devices and which one would be used.
     Devices,
-    /// Render a UV-mapped OBJ (with `vt`) textured with a checkerboard through its UVs, to PNG
+    /// Render a UV-mapped OBJ (with `vt`) or glTF (a TEXCOORD set) textured with a checkerboard through its UVs, to PNG
     /// (offscreen Vulkan graphics).
     Render(RenderArgs),
     /// Approximate a triangle mesh by at most K planar polygons (Hu & Zhang 2017).
@@ -435,12 +435,18 @@ enum BackendArg {
 
 #[derive(clap::Args)]
 struct ParamArgs {
-    /// Input surface: OBJ, PLY, OFF or STL by extension (triangles or polygons; polygons are
-    /// fan-triangulated; STL corners at equal positions are welded).
+    /// Input surface: OBJ, PLY, OFF, STL or glTF (.gltf, .glb) by extension (triangles or
+    /// polygons; polygons are fan-triangulated; STL corners, and a glTF primitive's vertices, at
+    /// equal positions are welded).
     input: PathBuf,
-    /// Output OBJ: the input's v and f order, plus one vt per vertex.
+    /// Output OBJ (the input's v and f order, plus one vt per vertex), or for a glTF input a
+    /// .glb or .gltf (+ .bin beside it): the input document with a new TEXCOORD set.
     #[arg(short, long)]
     output: PathBuf,
+    /// glTF output: the TEXCOORD_n set the map is written to (default: the next free one of
+    /// each primitive; a set that exists, or would leave a gap, is refused).
+    #[arg(long, value_name = "N")]
+    uv_set: Option<u32>,
     /// Start map. Default: lscm with the ADMM solver, tutte otherwise.
     #[arg(long, value_enum)]
     init: Option<InitArg>,
@@ -697,8 +703,13 @@ fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// Input OBJ with texture coordinates (`vt`), e.g. the output of `foldfree param`.
+    /// Input OBJ with texture coordinates (`vt`) or glTF (.glb, .gltf) with a TEXCOORD set,
+    /// e.g. the output of `foldfree param`.
     input: PathBuf,
+    /// glTF input: the TEXCOORD_n set the checker is drawn through (default: the highest set
+    /// every primitive has, the one `foldfree param` adds).
+    #[arg(long, value_name = "N")]
+    uv_set: Option<u32>,
     /// Output PNG.
     #[arg(short, long)]
     output: PathBuf,
@@ -768,12 +779,12 @@ fn surface_corners(path: &std::path::Path, max_elements: usize) -> foldfree::Res
 
 fn run_render(args: RenderArgs) -> foldfree::Result<()> {
     use foldfree::gpu::{render_checker, Context, ContextDesc, RenderDesc};
-    use foldfree::viz::render::{encode_rgba_png, read_obj_with_uv};
+    use foldfree::viz::render::{encode_rgba_png, read_with_uv};
     let mut outputs = Outputs::new();
     foldfree::vol::tetgen::tet_input(&mut outputs, &args.input);
     outputs.output(&args.output, "picture", &["png"])?;
     let (positions, uvs, indices) = match args.shade {
-        ShadeArg::Checker => read_obj_with_uv(&args.input, args.max_elements)?.corners(),
+        ShadeArg::Checker => read_with_uv(&args.input, args.max_elements, args.uv_set)?.corners(),
         ShadeArg::Normals => surface_corners(&args.input, args.max_elements)?,
     };
     if indices.len() / 3 > args.max_elements {
@@ -1073,6 +1084,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     admm.stop = Some(stop);
     let mut job = ParamJob::new(&args.input, &args.output);
     job.report = args.report.clone();
+    job.uv_set = args.uv_set;
     job.images = foldfree::viz::ImageOutputs {
         layout_svg: args.svg.clone(),
         layout_png: args.png.clone(),

@@ -219,6 +219,52 @@ const CASES: &[Case] = &[
         "cannot read: line 12: file ends inside facet 1",
     ),
     valid("stl_binary_square_valid.stl"),
+    valid("gltf_square_valid.gltf"),
+    valid("glb_square_valid.glb"),
+    bad(
+        "gltf_triangle_strip.gltf",
+        "cannot read: meshes[0].primitives[0]: mode 5 (TriangleStrip); only TRIANGLES (4) is read",
+    ),
+    bad(
+        "gltf_sparse_accessor.gltf",
+        "cannot read: meshes[0].primitives[0].attributes.POSITION (accessor 0): sparse accessors are not supported",
+    ),
+    bad(
+        "gltf_missing_bin.gltf",
+        "cannot read: buffers[0]: external buffer \"gltf_missing_bin_absent.bin\"",
+    ),
+    bad(
+        "gltf_index_out_of_range.gltf",
+        "cannot read: meshes[0].primitives[0].indices: triangle 1 refers to vertex 7, but there are only 4 vertices",
+    ),
+    bad(
+        "gltf_buffer_too_short.gltf",
+        "cannot read: buffers[0]: byteLength is 60, but the data has 36 bytes",
+    ),
+    bad(
+        "gltf_unsupported_data_uri.gltf",
+        "cannot read: buffers[0]: unsupported data URI \"data:text/plain,hello\"",
+    ),
+    bad(
+        "gltf_accessor_past_view.gltf",
+        "cannot read: meshes[0].primitives[0].attributes.POSITION (accessor 0): 5 elements of 12 bytes (stride 12) from byte 0 run past bufferView 0 (48 bytes)",
+    ),
+    bad(
+        "gltf_no_position.gltf",
+        "cannot read: meshes[0].primitives[0].attributes[\"POSITION\"]: Missing data",
+    ),
+    bad(
+        "gltf_not_json.gltf",
+        "cannot read: not valid JSON: EOF while parsing a list at line 2 column 0",
+    ),
+    bad(
+        "gltf_degenerate_triangle_second_primitive.gltf",
+        "meshes[0].primitives[1] triangle 0: face 2 is degenerate (area 0.000e0",
+    ),
+    bad(
+        "glb_truncated.glb",
+        "cannot read: byte 8: GLB: the header says 574 bytes, the file has 554",
+    ),
     bad("binary_garbage.mesh", ":1: not UTF-8 text (binary file?)"),
     bad(
         "empty_0_bytes.mesh",
@@ -430,6 +476,27 @@ fn atlas_problems(out: &Path) -> Vec<String> {
     }
 }
 
+/// glTF: `.gltf` and `.glb`.
+fn is_gltf(path: &Path) -> bool {
+    matches!(
+        path.extension().and_then(|e| e.to_str()),
+        Some("gltf" | "glb")
+    )
+}
+
+/// A written `.glb` reads back with one TEXCOORD set (the map) in every primitive.
+fn glb_problems(out: &Path) -> Vec<String> {
+    let Ok(bytes) = fs::read(out) else {
+        return vec![format!("no readable output at {}", out.display())];
+    };
+    let mut none = |_: &str| Err("no external buffers expected".to_string());
+    match foldfree::mesh::formats::gltf::parse_gltf(&bytes, out, &mut none) {
+        Ok(scene) if scene.primitives.iter().all(|p| p.texcoord_sets == [0]) => Vec::new(),
+        Ok(_) => vec!["the output glb lacks the new TEXCOORD_0".to_string()],
+        Err(e) => vec![format!("the output glb does not read back: {e}")],
+    }
+}
+
 /// Tet mesh formats: MEDIT `.mesh` and TetGen `.node` / `.ele`.
 fn is_tet(path: &Path) -> bool {
     matches!(
@@ -478,16 +545,23 @@ fn run_cmd(cmd: Cmd, input: &Path, out: &Path) -> Result<Run, String> {
     }
 }
 
-/// Runs `cmd` on `file` (output, for `param`, in `dir`) and lists every violated expectation.
-fn check(cmd: Cmd, file: &str, expect: Expect, dir: &TempDir) -> Vec<String> {
-    let input = bad_dir().join(file);
-    // The output's extension is checked before the input is read: a tet map is a `.mesh`.
+/// The `param` output of `file`. Its extension is checked before the input is read: a tet
+/// map is a `.mesh`; a glTF input is written back as a `.glb`.
+fn out_name(file: &str) -> String {
     let ext = if is_tet(Path::new(file)) {
         "mesh"
+    } else if is_gltf(Path::new(file)) {
+        "glb"
     } else {
         "obj"
     };
-    let out = dir.join(&format!("{file}.out.{ext}"));
+    format!("{file}.out.{ext}")
+}
+
+/// Runs `cmd` on `file` (output, for `param`, in `dir`) and lists every violated expectation.
+fn check(cmd: Cmd, file: &str, expect: Expect, dir: &TempDir) -> Vec<String> {
+    let input = bad_dir().join(file);
+    let out = dir.join(&out_name(file));
     let run = match run_cmd(cmd, &input, &out) {
         Ok(run) => run,
         Err(e) => return vec![e],
@@ -501,6 +575,8 @@ fn check(cmd: Cmd, file: &str, expect: Expect, dir: &TempDir) -> Vec<String> {
         Valid => {
             if failed {
                 problems.push(format!("exit {:?}, expected 0", run.code));
+            } else if cmd == Cmd::Param && is_gltf(&out) {
+                problems.extend(glb_problems(&out));
             } else if cmd == Cmd::Param {
                 problems.extend(output_problems(&out));
             } else if !run.stdout.contains("valid: yes") {
@@ -556,7 +632,7 @@ fn every_corpus_file_gives_its_documented_result_without_panic_or_hang() {
     let expected_outputs: BTreeSet<String> = CASES
         .iter()
         .filter(|c| matches!(c.param, Valid | Atlas))
-        .map(|c| format!("{}.out.obj", c.file))
+        .map(|c| out_name(c.file))
         .collect();
     let leftovers: Vec<String> = dir
         .entries()

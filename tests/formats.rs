@@ -429,7 +429,8 @@ fn malformed_files_give_located_errors() {
 
 /// A small deterministic stand-in for the fuzzer (`fuzz/fuzz_targets/surface_reader.rs`): every
 /// prefix of each encoding of a small mesh, and every byte replaced by a few values, parses to a
-/// mesh with in-range indices or to an error naming the file; never a panic.
+/// mesh with in-range indices or to an error naming the file; never a panic. The same for the
+/// glTF square of tests/data/bad as `.glb` and `.gltf` (`fuzz_targets/gltf_reader.rs`).
 #[test]
 fn every_prefix_and_byte_mutation_is_a_mesh_or_a_located_error() {
     let mesh = read_obj(&data_dir().join("unreferenced_vertex.obj")).expect("reads");
@@ -449,7 +450,14 @@ fn every_prefix_and_byte_mutation_is_a_mesh_or_a_located_error() {
             }
             Err(e) => assert!(e.to_string().starts_with("m: "), "{e}"),
         };
-    for (bytes, format) in &files {
+    let bad = data_dir().join("bad");
+    let gltf_files = ["glb_square_valid.glb", "gltf_square_valid.gltf"].map(|n| {
+        (
+            std::fs::read(bad.join(n)).expect("reads"),
+            SurfaceFormat::Gltf,
+        )
+    });
+    for (bytes, format) in files.iter().chain(&gltf_files) {
         for cut in 0..bytes.len() {
             check(&bytes[..cut], *format);
         }
@@ -468,7 +476,7 @@ fn every_prefix_and_byte_mutation_is_a_mesh_or_a_located_error() {
 fn tet_and_scene_formats_are_refused_by_name() {
     for (file, fragment) in [
         ("a.mesh", "tetrahedral mesh format"),
-        ("a.glb", "not read by foldfree"),
+        ("a.fbx", "not read by foldfree"),
     ] {
         let e = read_surface(Path::new(file), 10).expect_err("refused");
         assert!(e.to_string().contains(fragment), "{e}");

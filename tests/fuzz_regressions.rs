@@ -28,10 +28,11 @@ fn fuzzer_finds_stay_fixed() {
                     assert!(e.to_string().contains(&name), "{e}");
                 }
             }
-            Some(ext @ ("ply" | "off" | "stl")) => {
+            Some(ext @ ("ply" | "off" | "stl" | "gltf" | "glb")) => {
                 let format = match ext {
                     "ply" => foldfree::mesh::SurfaceFormat::Ply,
                     "off" => foldfree::mesh::SurfaceFormat::Off,
+                    "gltf" | "glb" => foldfree::mesh::SurfaceFormat::Gltf,
                     _ => foldfree::mesh::SurfaceFormat::Stl,
                 };
                 match foldfree::mesh::formats::parse_surface(&bytes, &path, format) {

@@ -90,6 +90,24 @@ impl Outputs {
         self
     }
 
+    /// Records an input found while reading another (a glTF file's external `.bin`), after
+    /// the outputs were planned: refused when a planned output is that file, so the commit can
+    /// never replace it.
+    pub fn late_input(&mut self, path: &Path) -> Result<&mut Outputs, FileError> {
+        let Some(id) = identity(path) else {
+            return Ok(self);
+        };
+        if let Some(o) = self.planned.iter().find(|o| o.id == id) {
+            return Err(FileError::SameFile {
+                path: o.path.clone(),
+                what: o.what.clone(),
+                other: format!("the input {}", path.display()),
+            });
+        }
+        self.inputs.push((path.to_path_buf(), id));
+        Ok(self)
+    }
+
     /// Checks and reserves an output path for `what` (e.g. "report"), whose extension must be
     /// one of `extensions` (lower case, without the dot; empty: any).
     pub fn output(

@@ -67,4 +67,12 @@ pub enum MeshError {
     NotDisk { file: PathBuf, what: String },
     #[error("{file}: {what}")]
     TooLarge { file: PathBuf, what: String },
+    /// Another error about a face or vertex, placed in the file's own terms where the file's
+    /// numbering differs from the mesh's (a glTF primitive and its triangle).
+    #[error("{file}: {place}: {what}")]
+    InPlace {
+        file: PathBuf,
+        place: String,
+        what: String,
+    },
 }

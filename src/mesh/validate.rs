@@ -60,10 +60,27 @@ pub fn load(
     path: &Path,
     opts: &ValidateOptions,
 ) -> Result<(TriMesh, Topology, ValidationReport), MeshError> {
+    if formats::SurfaceFormat::from_path(path)? == formats::SurfaceFormat::Gltf {
+        let (scene, topo, report) = load_gltf(path, opts)?;
+        return Ok((scene.mesh, topo, report));
+    }
     let max = opts.max_faces.unwrap_or(usize::MAX);
     let (mesh, _) = formats::read_surface(path, max)?;
     let (report, topo) = validate_with_topology(&mesh, path, opts)?;
     Ok((mesh, topo, report))
+}
+
+/// [`load`] of a glTF file, keeping the document (to write it back); an error about a face
+/// names the glTF primitive and triangle ([`formats::gltf::GltfScene::locate`]).
+pub fn load_gltf(
+    path: &Path,
+    opts: &ValidateOptions,
+) -> Result<(formats::gltf::GltfScene, Topology, ValidationReport), MeshError> {
+    let max = opts.max_faces.unwrap_or(usize::MAX);
+    let scene = formats::gltf::read_gltf(path, max)?;
+    let (report, topo) =
+        validate_with_topology(&scene.mesh, path, opts).map_err(|e| scene.locate(e))?;
+    Ok((scene, topo, report))
 }
 
 /// [`validate`], also returning the topology the manifold and orientation checks needed.

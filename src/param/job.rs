@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use crate::files::Outputs;
 use crate::init::InitMethod;
+use crate::mesh::formats::gltf;
 use crate::mesh::{self, Scale, TriMesh};
 use crate::metrics;
 use crate::param::admm::AdmmOptions;
@@ -66,6 +67,8 @@ pub struct ParamJob {
     pub cut: CutMode,
     pub cut_options: crate::param::cut::CutOptions,
     pub pack: crate::param::pack::PackOptions,
+    /// glTF output: the `TEXCOORD_n` set to write (`None`: each primitive's next free one).
+    pub uv_set: Option<u32>,
 }
 
 impl ParamJob {
@@ -95,6 +98,7 @@ impl ParamJob {
             cut: CutMode::Auto,
             cut_options: Default::default(),
             pack: Default::default(),
+            uv_set: None,
         }
     }
 }
@@ -129,12 +133,16 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     job.admm.validate()?;
     let mut outputs = Outputs::new();
     outputs.input(&job.input);
-    outputs.output(&job.output, "map", &["obj"])?;
+    outputs.output(&job.output, "map", &["obj", "glb", "gltf"])?;
+    let gltf_out = plan_gltf_output(job, &mut outputs)?;
     if let Some(p) = &job.report {
         outputs.output(p, "report", &["json"])?;
     }
     job.images.plan(&mut outputs)?;
-    let (file_mesh, topo, vreport) = mesh::load(&job.input, &job.validate)?;
+    let (file_mesh, topo, vreport, scene) = load(job)?;
+    for bin in scene.iter().flat_map(|s| &s.external) {
+        outputs.late_input(bin)?;
+    }
     let pinched = topo.nonmanifold_vertices.len();
     let split = (pinched > 0).then(|| mesh::topology::split_pinched(&file_mesh, &topo));
     let topo = match &split {
@@ -163,13 +171,26 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     for p in &mut out.mesh.positions {
         *p = scale.invert(*p);
     }
-    let text =
-        mesh::obj::obj_text_with_corner_uv(&file_mesh, &out.uv, &out.mesh.faces).map_err(|e| {
-            Error::Solve(crate::linalg::SolveError::Failed {
-                what: format!("{}: {e}; nothing was written", job.output.display()),
-            })
-        })?;
-    outputs.set(&job.output, text.into_bytes());
+    let not_written = |e: String| {
+        Error::Solve(crate::linalg::SolveError::Failed {
+            what: format!("{}: {e}; nothing was written", job.output.display()),
+        })
+    };
+    match (&gltf_out, &scene) {
+        (Some((target, bin)), Some(scene)) => {
+            let w = gltf::write_gltf(scene, &out.uv, &out.mesh.faces, job.uv_set, target)
+                .map_err(not_written)?;
+            outputs.set(&job.output, w.main);
+            if let (Some(path), Some(bytes)) = (bin, w.bin) {
+                outputs.set(path, bytes);
+            }
+        }
+        _ => {
+            let text = mesh::obj::obj_text_with_corner_uv(&file_mesh, &out.uv, &out.mesh.faces)
+                .map_err(|e| not_written(e.to_string()))?;
+            outputs.set(&job.output, text.into_bytes());
+        }
+    }
     out.report.written = true;
     out.report.seconds = t0.elapsed().as_secs_f64();
     if let Some(p) = &job.report {
@@ -177,6 +198,60 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     }
     outputs.commit()?;
     Ok(out)
+}
+
+/// For a `.glb` / `.gltf` output: the container to write and, for `.gltf`, the `.bin` beside
+/// it (planned with the map: same stem, committed together). A glTF output needs a glTF input,
+/// whose document it writes back.
+fn plan_gltf_output(
+    job: &ParamJob,
+    outputs: &mut Outputs,
+) -> Result<Option<(gltf::GltfTarget, Option<PathBuf>)>> {
+    let ext = job
+        .output
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if !matches!(ext.as_deref(), Some("glb" | "gltf")) {
+        return Ok(None);
+    }
+    if mesh::SurfaceFormat::from_path(&job.input)? != mesh::SurfaceFormat::Gltf {
+        return Err(Error::Usage(format!(
+            "{}: a glTF output needs a glTF input (.gltf or .glb), whose document it extends; \
+             write an OBJ instead",
+            job.output.display()
+        )));
+    }
+    if ext.as_deref() == Some("glb") {
+        return Ok(Some((gltf::GltfTarget::Glb, None)));
+    }
+    let bin = job.output.with_extension("bin");
+    outputs.output(&bin, "map's buffer", &["bin"])?;
+    let bin_uri = bin
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Ok(Some((gltf::GltfTarget::Gltf { bin_uri }, Some(bin))))
+}
+
+/// [`mesh::load`], and for a glTF input also the document to write back (its `--uv-set` is
+/// checked here, before any work).
+fn load(
+    job: &ParamJob,
+) -> Result<(
+    TriMesh,
+    mesh::Topology,
+    mesh::ValidationReport,
+    Option<gltf::GltfScene>,
+)> {
+    if mesh::SurfaceFormat::from_path(&job.input)? != mesh::SurfaceFormat::Gltf {
+        let (m, topo, report) = mesh::load(&job.input, &job.validate)?;
+        return Ok((m, topo, report, None));
+    }
+    let (scene, topo, report) = mesh::validate::load_gltf(&job.input, &job.validate)?;
+    scene
+        .uv_sets(job.uv_set)
+        .map_err(|e| Error::Usage(format!("{}: {e}", job.input.display())))?;
+    Ok((scene.mesh.clone(), topo, report, Some(scene)))
 }
 
 /// The solve of [`run_param`] on the normalised mesh: one disk, or the atlas path.

@@ -1,4 +1,5 @@
-//! The checkerboard texture-mapping view (`foldfree render`): reading an OBJ with its `vt`,
+//! The checkerboard texture-mapping view (`foldfree render`): reading an OBJ with its `vt` (or
+//! a glTF file with a TEXCOORD set),
 //! expanding it to per-corner vertices (so UV seams stay sharp) and encoding the rendered
 //! RGBA8 pixels as PNG. The drawing itself is [`crate::gpu::render_checker`].
 
@@ -143,6 +144,63 @@ fn no_vt(name: &str) -> Error {
     Error::Usage(format!(
         "{name}: no texture coordinates (`vt` lines); run `foldfree param` first to get a UV map"
     ))
+}
+
+/// Reads a UV-mapped surface: an OBJ with `vt` ([`read_obj_with_uv`]) or a glTF file with a
+/// `TEXCOORD_set` in every primitive ([`read_gltf_with_uv`]; `set` is ignored for OBJ).
+pub fn read_with_uv(path: &Path, max_faces: usize, set: Option<u32>) -> Result<UvObj> {
+    match crate::mesh::SurfaceFormat::from_path(path)? {
+        crate::mesh::SurfaceFormat::Gltf => read_gltf_with_uv(path, max_faces, set),
+        _ => read_obj_with_uv(path, max_faces),
+    }
+}
+
+/// A glTF file's triangles with texture coordinates `TEXCOORD_set` (default: the highest set
+/// every primitive has, which is the one `foldfree param` added), turned to foldfree's
+/// bottom-left origin (`(u, 1 − v)`), so the checker looks as it does through the OBJ of the
+/// same map. Positions are the file's, welded per primitive as for mapping; UVs stay per glTF
+/// vertex, so seams stay sharp.
+pub fn read_gltf_with_uv(path: &Path, max_faces: usize, set: Option<u32>) -> Result<UvObj> {
+    let scene = crate::mesh::formats::gltf::read_gltf(path, max_faces)?;
+    let common = scene
+        .primitives
+        .iter()
+        .map(|p| p.texcoord_sets.iter().max().copied())
+        .min()
+        .flatten();
+    let Some(set) = set.or(common) else {
+        return Err(Error::Usage(format!(
+            "{}: a primitive has no TEXCOORD set; run `foldfree param` first to get a UV map",
+            path.display()
+        )));
+    };
+    let mut obj = UvObj {
+        positions: scene.mesh.positions.clone(),
+        faces: scene
+            .mesh
+            .faces
+            .iter()
+            .map(|f| f.map(|v| v as usize))
+            .collect(),
+        ..UvObj::default()
+    };
+    for (k, p) in scene.primitives.iter().enumerate() {
+        let uv = scene
+            .texcoords(k, set)
+            .map_err(|e| Error::Usage(format!("{}: {e}", path.display())))?
+            .ok_or_else(|| {
+                Error::Usage(format!(
+                    "{}: {} has no TEXCOORD_{set}",
+                    path.display(),
+                    p.path()
+                ))
+            })?;
+        let base = obj.uvs.len();
+        obj.uvs.extend(uv);
+        obj.face_uvs
+            .extend(p.triangles.iter().map(|t| t.map(|v| base + v as usize)));
+    }
+    Ok(obj)
 }
 
 /// Reads `path` with [`parse_obj_with_uv`].

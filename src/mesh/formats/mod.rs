@@ -1,5 +1,6 @@
-//! Surface mesh files in: OBJ, PLY (ASCII, binary little and big endian), OFF (ASCII) and STL
-//! (ASCII and binary), chosen by the file's extension; anything else is read as OBJ.
+//! Surface mesh files in: OBJ, PLY (ASCII, binary little and big endian), OFF (ASCII), STL
+//! (ASCII and binary) and glTF 2.0 (`.gltf`, `.glb`; also written back, see [`gltf`]), chosen
+//! by the file's extension; anything else is read as OBJ.
 //!
 //! The PLY, OFF and STL parsers are written here rather than taken from a crate: `stl_io`
 //! returns plain `io::Error`s (no line or byte offset) and keeps `f32` coordinates (an ASCII
@@ -19,6 +20,7 @@
 //! Non-finite coordinates, degenerate, duplicate and non-manifold faces are left to
 //! [`super::validate`], which names the element, as for OBJ.
 
+pub mod gltf;
 mod off;
 mod ply;
 mod stl;
@@ -39,6 +41,8 @@ pub enum SurfaceFormat {
     Ply,
     Off,
     Stl,
+    /// `.gltf` or `.glb` (told apart by content).
+    Gltf,
 }
 
 impl SurfaceFormat {
@@ -56,10 +60,11 @@ impl SurfaceFormat {
             "ply" => return Ok(SurfaceFormat::Ply),
             "off" => return Ok(SurfaceFormat::Off),
             "stl" => return Ok(SurfaceFormat::Stl),
+            "gltf" | "glb" => return Ok(SurfaceFormat::Gltf),
             "mesh" | "node" | "ele" | "vtk" => {
                 "a tetrahedral mesh format; surface maps need a triangle mesh (OBJ, PLY, OFF or STL)"
             }
-            "gltf" | "glb" | "fbx" => "not read by foldfree; convert the surface to OBJ, PLY, OFF or STL",
+            "fbx" => "not read by foldfree; convert the surface to OBJ, PLY, OFF, STL or glTF",
             _ => return Ok(SurfaceFormat::Obj),
         };
         Err(MeshError::Read {
@@ -75,6 +80,7 @@ impl SurfaceFormat {
             SurfaceFormat::Ply => "PLY",
             SurfaceFormat::Off => "OFF",
             SurfaceFormat::Stl => "STL",
+            SurfaceFormat::Gltf => "glTF",
         }
     }
 }
@@ -133,6 +139,12 @@ impl From<obj::ObjInfo> for SurfaceInfo {
 /// see [`parse_stl`]).
 pub fn read_surface(path: &Path, max_faces: usize) -> Result<(TriMesh, SurfaceInfo), MeshError> {
     let format = SurfaceFormat::from_path(path)?;
+    if format == SurfaceFormat::Gltf {
+        // External buffers are read from the file's folder.
+        let scene = gltf::read_gltf(path, max_faces)?;
+        let info = scene.info();
+        return Ok((scene.mesh, info));
+    }
     let bytes = read_input(path, max_faces, format)?;
     parse_surface(&bytes, path, format)
 }
@@ -148,6 +160,14 @@ pub fn parse_surface(
         SurfaceFormat::Ply => parse_ply(bytes, file),
         SurfaceFormat::Off => parse_off(bytes, file),
         SurfaceFormat::Stl => parse_stl(bytes, file),
+        SurfaceFormat::Gltf => {
+            let mut no_files =
+                |uri: &str| Err(format!("external buffer {uri:?}: not read from memory"));
+            gltf::parse_gltf(bytes, file, &mut no_files).map(|s| {
+                let info = s.info();
+                (s.mesh, info)
+            })
+        }
     }
 }
 
@@ -183,7 +203,7 @@ pub(crate) fn read_input(
 fn article(format: SurfaceFormat) -> &'static str {
     match format {
         SurfaceFormat::Obj | SurfaceFormat::Off => "an",
-        SurfaceFormat::Ply | SurfaceFormat::Stl => "a",
+        SurfaceFormat::Ply | SurfaceFormat::Stl | SurfaceFormat::Gltf => "a",
     }
 }
 
