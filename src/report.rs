@@ -60,6 +60,8 @@ pub struct ParamReport {
     /// Whether the output OBJ was written: always when a report is produced — every run that
     /// has a flip-free map writes it.
     pub written: bool,
+    /// How the written texture coordinates are to be read.
+    pub uv_output: UvOutput,
     /// Seams, charts and packing, when the mesh was cut into charts.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub atlas: Option<AtlasReport>,
@@ -67,6 +69,30 @@ pub struct ParamReport {
     /// ran: `--solver global`, or after ADMM's hand-off).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub global: Option<crate::param::global::GlobalResult>,
+}
+
+/// The written file's texture-coordinate convention, so that a reader of the report knows how
+/// to read the UVs without knowing the formats: OBJ's origin is the image's bottom-left (foldfree
+/// works in it), glTF's is the top-left (`v_file = 1 − v`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct UvOutput {
+    /// `obj` or `gltf`.
+    pub format: &'static str,
+    /// `bottom-left` (OBJ) or `top-left` (glTF: written as `v' = 1 − v`).
+    pub v_origin: &'static str,
+    /// glTF: the `TEXCOORD_n` written, per primitive in file order (meshes, then primitives).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub texcoord_sets: Vec<u32>,
+}
+
+impl UvOutput {
+    pub fn obj() -> UvOutput {
+        UvOutput {
+            format: "obj",
+            v_origin: "bottom-left",
+            texcoord_sets: Vec::new(),
+        }
+    }
 }
 
 impl ParamReport {

@@ -333,6 +333,10 @@ fn disk_glb_round_trip_keeps_attributes_and_adds_a_flipped_v_set() {
     let (out, r) = map_glb(&dir, &prim, &["--init", "tutte", "--solver", "none"]);
     assert_eq!(r["faces"], f.len(), "every triangle read");
     assert!(r["atlas"].is_null(), "a disk: no atlas");
+    // The report states the convention the flip test below checks.
+    assert_eq!(r["uv_output"]["format"], "gltf");
+    assert_eq!(r["uv_output"]["v_origin"], "top-left");
+    assert_eq!(r["uv_output"]["texcoord_sets"], serde_json::json!([1]));
     let bytes = fs::read(&out).unwrap();
     assert_eq!(spec_problems(&bytes, None), Vec::<String>::new());
     let (json, prims) = glb::read_back(&bytes, None);

@@ -180,6 +180,11 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
         (Some((target, bin)), Some(scene)) => {
             let w = gltf::write_gltf(scene, &out.uv, &out.mesh.faces, job.uv_set, target)
                 .map_err(not_written)?;
+            out.report.uv_output = crate::report::UvOutput {
+                format: "gltf",
+                v_origin: "top-left",
+                texcoord_sets: scene.uv_sets(job.uv_set).map_err(not_written)?,
+            };
             outputs.set(&job.output, w.main);
             if let (Some(path), Some(bytes)) = (bin, w.bin) {
                 outputs.set(path, bytes);
@@ -188,6 +193,7 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
         _ => {
             let text = mesh::obj::obj_text_with_corner_uv(&file_mesh, &out.uv, &out.mesh.faces)
                 .map_err(|e| not_written(e.to_string()))?;
+            out.report.uv_output = crate::report::UvOutput::obj();
             outputs.set(&job.output, text.into_bytes());
         }
     }
