@@ -43,8 +43,10 @@ pub struct ParamReport {
     /// (the largest chart for an atlas).
     pub stop: String,
     pub energy: Option<String>,
-    /// `iterations_admm + iterations_global`.
+    /// `iterations_start_proxy + iterations_admm + iterations_global`.
     pub iterations: usize,
+    /// Proxy iterations of the global solver that made ADMM's SD start (0 otherwise).
+    pub iterations_start_proxy: usize,
     pub iterations_admm: usize,
     pub iterations_global: usize,
     /// Whether the stop test of the last solver was met (every chart's, for an atlas). A map

@@ -138,6 +138,7 @@ pub(crate) fn run_atlas(
             largest = faces.len();
             stop = map.stop_summary();
         }
+        report.iterations_start_proxy += map.start_proxy_iterations;
         if let Some(result) = &map.admm {
             report.backend = result.backend.into();
             report.device.clone_from(&result.device);
@@ -155,7 +156,8 @@ pub(crate) fn run_atlas(
         }
         chart_meshes.push((global, sub));
     }
-    report.iterations = report.iterations_admm + report.iterations_global;
+    report.iterations =
+        report.iterations_start_proxy + report.iterations_admm + report.iterations_global;
     if solver != SolverChoice::None {
         report.solver = solver.name().into();
         report.solver_path = path.name().into();

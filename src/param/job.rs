@@ -340,7 +340,9 @@ fn solve(
         report.iterations_global = result.iterations;
         report.global = Some(result);
     }
-    report.iterations = report.iterations_admm + report.iterations_global;
+    report.iterations_start_proxy = map.start_proxy_iterations;
+    report.iterations =
+        report.iterations_start_proxy + report.iterations_admm + report.iterations_global;
     report.input = job.input.display().to_string();
     report.output = job.output.display().to_string();
     report.vertices = mesh.positions.len();

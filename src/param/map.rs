@@ -128,6 +128,8 @@ pub struct MapOutput {
     pub admm: Option<admm::AdmmResult>,
     /// The global solver's run, when it ran (alone, or after ADMM's hand-off).
     pub global: Option<global::GlobalResult>,
+    /// Proxy iterations of ADMM's SD start (0 when none ran; see [`compute_map`]).
+    pub start_proxy_iterations: usize,
     pub path: SolverPath,
     /// Per-kernel device times (Vulkan with `profile`).
     pub kernel_times: Option<admm::vulkan::KernelTimes>,
@@ -153,11 +155,15 @@ impl MapOutput {
     pub fn stop_summary(&self) -> String {
         let admm = self.admm.as_ref().map(|r| r.stop_summary());
         let global = self.global.as_ref().map(|g| g.stop_summary());
-        match (admm, global) {
+        let summary = match (admm, global) {
             (Some(a), Some(g)) => format!("{a}; handed to the global solver: {g}"),
             (Some(a), None) => a,
             (None, Some(g)) => g,
             (None, None) => "start map only".into(),
+        };
+        match self.start_proxy_iterations {
+            0 => summary,
+            n => format!("start: {n} proxy iterations; {summary}"),
         }
     }
 }
@@ -215,6 +221,7 @@ pub fn compute_map(
         init_flips,
         admm: None,
         global: None,
+        start_proxy_iterations: 0,
         path: SolverPath::None,
         kernel_times: None,
         bytes_per_iteration: None,
@@ -253,9 +260,37 @@ pub fn compute_map(
         SolverChoice::None => {}
         SolverChoice::Admm => {
             let problem = AdmmProblem::new(mesh, topo, &frames);
+            let mut folded = init_flips > 0;
+            if opts.energy == crate::param::Energy::SymmetricDirichlet {
+                // SD's start: the conformal start map differs from SD's solution by area moved
+                // across the whole mesh (protrusions the conformal map shrinks by orders of
+                // magnitude must grow back), which ADMM's local steps carry one ring of faces
+                // per iteration: 22 of 61 corpus disks stalled with μ at its cap. A proxy
+                // step of the global solver (SLIM's local-global step: one Poisson solve
+                // over the whole mesh) moves it in a few iterations. They run while each
+                // lowers the energy by more than the global solver's own proxy switch (the
+                // point where it judges the remaining change local and turns to Newton);
+                // ADMM converges from there. Every step is flip-free, so the start is too.
+                if folded || !finite(&uv) {
+                    uv = tutte_map(mesh, topo, area_3d, &finite)?;
+                }
+                let start = global::solve(
+                    mesh,
+                    &frames,
+                    &uv,
+                    &GlobalOptions {
+                        proxy_only: true,
+                        ..global_opts.clone()
+                    },
+                    &mut |it| progress(Progress::Global(it)),
+                )?;
+                out.start_proxy_iterations = start.iterations;
+                uv = start.uv;
+                folded = false;
+            }
             // A start map with flips (LSCM can fold) gets a flip-free safety net: never
             // output a flipped map because the solver could not unfold one.
-            let fallback = if init_flips > 0 {
+            let fallback = if folded {
                 Some(tutte_map(mesh, topo, area_3d, &finite)?)
             } else {
                 None

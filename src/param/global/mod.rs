@@ -69,6 +69,10 @@ pub struct GlobalOptions {
     pub energy_window: usize,
     /// Stay in the proxy phase while the relative objective decrease per step exceeds this.
     pub proxy_switch: f64,
+    /// Stop where the proxy phase ends ([`StopReason::ProxyDone`]): the map then has the
+    /// energy's global scales and is a start for another solver (see
+    /// [`crate::param::compute_map`]: SD's ADMM start).
+    pub proxy_only: bool,
     /// Per-face energy bound for progressive references (`None`: always the rest triangles).
     pub progressive_cap: Option<f64>,
     /// Iterations after which progressive references are dropped even if some faces are
@@ -101,6 +105,7 @@ impl GlobalOptions {
             energy_tol: 1e-6,
             energy_window: 3,
             proxy_switch: 0.1,
+            proxy_only: false,
             progressive_cap: Some(match energy {
                 Energy::SymmetricDirichlet => 50.0,
                 Energy::Mips => 20.0,
@@ -140,6 +145,8 @@ pub enum StopReason {
     /// No step along the direction decreased the energy (converged to rounding).
     Stalled,
     Interrupted,
+    /// The proxy phase ended ([`GlobalOptions::proxy_only`]).
+    ProxyDone,
 }
 
 /// One iteration of [`solve`].
@@ -216,6 +223,7 @@ impl GlobalResult {
             StopReason::Stalled => "converged (no step decreases the energy)",
             StopReason::MaxIterations => "iteration cap",
             StopReason::Interrupted => "interrupted",
+            StopReason::ProxyDone => "proxy phase done (decrease per step under its switch)",
         };
         format!(
             "global {why} after {} iterations (relative energy decrease {:.1e} per iteration over the last {} iterations, tolerance {:.0e}; gradient norm {:.1e})",
@@ -559,6 +567,10 @@ pub fn solve(
         progress(&rec);
         history.push(rec);
         if phase == Phase::Proxy && rel <= opts.proxy_switch {
+            if opts.proxy_only {
+                stop = StopReason::ProxyDone;
+                break;
+            }
             phase = Phase::Newton;
         }
         // A reference that follows a few stubborn faces lets the surrogate fall while the
