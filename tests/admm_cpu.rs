@@ -274,14 +274,8 @@ fn finger(n: usize, len: f64) -> TriMesh {
     TriMesh { positions, faces }
 }
 
-/// Per-face penalties ([`admm::cpu::penalty_factors`]): on a finger whose conformal map shrinks
-/// the tube by ~e^−8 (faces 1e-7 of the annulus's area), MIPS ADMM from LSCM meets its own stop
-/// test — no hand-off to the global solver — with a flip-free map. With one penalty for all
-/// faces, the tube's faces (curvature ~1e7 × the annulus's) stayed uncoupled and the run
-/// stalled at its μ cap (measured: 2 757 iterations, then the hand-off).
-#[test]
-fn admm_alone_converges_where_the_conformal_scale_spans_seven_decades() {
-    use foldfree::param::{compute_map, SolverChoice, SolverPath};
+/// The default pipeline (LSCM start, ADMM with the hand-off) on `finger(16, 8)`.
+fn finger_map(energy: Energy) -> (TriMesh, Topology, foldfree::param::MapOutput) {
     let m = finger(16, 8.0);
     let (_, t) = mesh::validate::validate_with_topology(
         &m,
@@ -289,17 +283,28 @@ fn admm_alone_converges_where_the_conformal_scale_spans_seven_decades() {
         &mesh::ValidateOptions::default(),
     )
     .expect("the finger is a valid disk");
-    let opts = AdmmOptions::for_energy(Energy::Mips);
-    let out = compute_map(
+    let out = foldfree::param::compute_map(
         &m,
         &t,
         InitMethod::Lscm,
-        SolverChoice::Admm,
-        &opts,
+        foldfree::param::SolverChoice::Admm,
+        &AdmmOptions::for_energy(energy),
         None,
         &mut |_| {},
     )
     .expect("map");
+    (m, t, out)
+}
+
+/// Per-face penalties ([`admm::cpu::penalty_factors`]): on a finger whose conformal map shrinks
+/// the tube by ~e^−8 (faces 1e-7 of the annulus's area), MIPS ADMM from LSCM meets its own stop
+/// test — no hand-off to the global solver — with a flip-free map. With one penalty for all
+/// faces, the tube's faces (curvature ~1e7 × the annulus's) stayed uncoupled and the run
+/// stalled at its μ cap (measured: 2 757 iterations, then the hand-off).
+#[test]
+fn admm_alone_converges_where_the_conformal_scale_spans_seven_decades() {
+    use foldfree::param::SolverPath;
+    let (m, t, out) = finger_map(Energy::Mips);
     let admm = out.admm.as_ref().expect("ADMM ran");
     let tube_scale = {
         let frames = mesh::frames::compute(&m);
@@ -327,25 +332,8 @@ fn admm_alone_converges_where_the_conformal_scale_spans_seven_decades() {
 /// conformal start).
 #[test]
 fn sd_admm_starts_from_proxy_steps_and_converges_alone() {
-    use foldfree::param::{compute_map, SolverChoice, SolverPath};
-    let m = finger(16, 8.0);
-    let (_, t) = mesh::validate::validate_with_topology(
-        &m,
-        Path::new("finger"),
-        &mesh::ValidateOptions::default(),
-    )
-    .expect("the finger is a valid disk");
-    let opts = AdmmOptions::for_energy(Energy::SymmetricDirichlet);
-    let out = compute_map(
-        &m,
-        &t,
-        InitMethod::Lscm,
-        SolverChoice::Admm,
-        &opts,
-        None,
-        &mut |_| {},
-    )
-    .expect("map");
+    use foldfree::param::SolverPath;
+    let (m, _, out) = finger_map(Energy::SymmetricDirichlet);
     assert!(
         (1..=50).contains(&out.start_proxy_iterations),
         "{} proxy steps",

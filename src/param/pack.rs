@@ -912,26 +912,52 @@ mod tests {
         )
     }
 
-    /// Charts packed at 256² with 2 texels padding: inside the square, counter-clockwise
-    /// still, and their conservative footprints (recomputed from the final UVs) 2 texels apart.
-    #[test]
-    fn packed_charts_keep_their_padding_and_orientation() {
-        let mut uv = Vec::new();
-        let mut faces = Vec::new();
-        let mut verts = Vec::new();
-        for i in 0..9u32 {
-            let (p, f) = rect(4 * i, 1.0 + i as f64, 0.5 + 0.3 * i as f64, 0.3 * i as f64);
+    /// `n` rectangles (`dims(i)` = width, height, angle) as charts of one UV array: the UVs,
+    /// each chart's faces and vertices.
+    #[allow(clippy::type_complexity)]
+    fn rects(
+        n: u32,
+        dims: impl Fn(u32) -> (f64, f64, f64),
+    ) -> (Vec<[f64; 2]>, Vec<Vec<[u32; 3]>>, Vec<Vec<u32>>) {
+        let (mut uv, mut faces, mut verts) = (Vec::new(), Vec::new(), Vec::new());
+        for i in 0..n {
+            let (w, h, angle) = dims(i);
+            let (p, f) = rect(4 * i, w, h, angle);
             uv.extend(p);
             faces.push(f);
             verts.push((4 * i..4 * i + 4).collect::<Vec<u32>>());
         }
-        let charts: Vec<ChartRef> = (0..9)
+        (uv, faces, verts)
+    }
+
+    /// The charts of [`rects`], chart `i` of 3D area `area(i)`.
+    fn chart_refs<'a>(
+        faces: &'a [Vec<[u32; 3]>],
+        verts: &'a [Vec<u32>],
+        area: impl Fn(usize) -> f64,
+    ) -> Vec<ChartRef<'a>> {
+        (0..faces.len())
             .map(|i| ChartRef {
                 vertices: &verts[i],
                 faces: &faces[i],
-                area_3d: (1.0 + i as f64) * (0.5 + 0.3 * i as f64),
+                area_3d: area(i),
             })
-            .collect();
+            .collect()
+    }
+
+    /// Charts packed at 256² with 2 texels padding: inside the square, counter-clockwise
+    /// still, and their conservative footprints (recomputed from the final UVs) 2 texels apart.
+    #[test]
+    fn packed_charts_keep_their_padding_and_orientation() {
+        let size = |i: f64| (1.0 + i, 0.5 + 0.3 * i);
+        let (mut uv, faces, verts) = rects(9, |i| {
+            let (w, h) = size(f64::from(i));
+            (w, h, 0.3 * f64::from(i))
+        });
+        let charts = chart_refs(&faces, &verts, |i| {
+            let (w, h) = size(i as f64);
+            w * h
+        });
         let opts = PackOptions {
             resolution: 256,
             padding: 2,
@@ -986,22 +1012,8 @@ mod tests {
     /// counter-clockwise; with one page allowed, the old single texture.
     #[test]
     fn pages_hold_what_one_texture_cannot_at_that_density() {
-        let mut uv0 = Vec::new();
-        let mut faces = Vec::new();
-        let mut verts = Vec::new();
-        for i in 0..4u32 {
-            let (p, f) = rect(4 * i, 1.0, 1.0, 0.1 * i as f64);
-            uv0.extend(p);
-            faces.push(f);
-            verts.push((4 * i..4 * i + 4).collect::<Vec<u32>>());
-        }
-        let charts: Vec<ChartRef> = (0..4)
-            .map(|i| ChartRef {
-                vertices: &verts[i],
-                faces: &faces[i],
-                area_3d: 1.0,
-            })
-            .collect();
+        let (uv0, faces, verts) = rects(4, |i| (1.0, 1.0, 0.1 * f64::from(i)));
+        let charts = chart_refs(&faces, &verts, |_| 1.0);
         let run = |max_pages| {
             let mut uv = uv0.clone();
             let opts = PackOptions {
@@ -1081,22 +1093,8 @@ mod tests {
 
     #[test]
     fn too_many_charts_for_the_resolution_is_an_error() {
-        let mut uv = Vec::new();
-        let mut faces = Vec::new();
-        let mut verts = Vec::new();
-        for i in 0..200u32 {
-            let (p, f) = rect(4 * i, 1.0, 1.0, 0.0);
-            uv.extend(p);
-            faces.push(f);
-            verts.push((4 * i..4 * i + 4).collect::<Vec<u32>>());
-        }
-        let charts: Vec<ChartRef> = (0..200)
-            .map(|i| ChartRef {
-                vertices: &verts[i],
-                faces: &faces[i],
-                area_3d: 1.0,
-            })
-            .collect();
+        let (mut uv, faces, verts) = rects(200, |_| (1.0, 1.0, 0.0));
+        let charts = chart_refs(&faces, &verts, |_| 1.0);
         let opts = PackOptions {
             resolution: 16,
             padding: 2,
