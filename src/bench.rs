@@ -256,11 +256,12 @@ pub fn profile_mesh(
     let opts = AdmmOptions::default();
     let mu = opts.initial_mu_rel() / problem.n_faces().max(1) as f64;
     let state = AdmmState::from_uv(&problem, &unit.faces, &uv);
+    let factors = crate::param::admm::cpu::penalty_factors(opts.energy, &problem.weight, &state.a);
     let iterations = iterations.max(1);
 
     let mut profiled =
         VulkanExecutor::new(ctx, &problem, opts.energy, opts.newton_iters, true, None)?;
-    profiled.upload(&state)?;
+    profiled.upload(&state, &factors)?;
     profiled.iterate(iterations, mu)?;
     let times = profiled.kernel_times().cloned().unwrap_or_default();
     let kernel_bytes = profiled.kernel_bytes();
@@ -282,7 +283,7 @@ pub fn profile_mesh(
         false,
         Some(slicing),
     )?;
-    plain.upload(&state)?;
+    plain.upload(&state, &factors)?;
     let t = std::time::Instant::now();
     let mut done = 0;
     while done < iterations {

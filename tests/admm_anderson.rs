@@ -44,8 +44,9 @@ fn residual_after(
     accel: Accel,
 ) -> (f64, f64, Option<(usize, usize)>) {
     let mut exec = CpuExecutor::new(p, energy, 1).with_accel(accel, 6, 1);
-    exec.upload(&AdmmState::from_uv(p, &m.faces, uv))
-        .expect("upload");
+    let state = AdmmState::from_uv(p, &m.faces, uv);
+    let factors = foldfree::param::admm::cpu::penalty_factors(energy, &p.weight, &state.a);
+    exec.upload(&state, &factors).expect("upload");
     let r = exec
         .iterate(iters, mu_rel / p.n_faces() as f64)
         .expect("iterate");

@@ -149,12 +149,11 @@ fn executor_batches_equal_single_iterations() {
     let lscm = start(&m, &t, InitMethod::Lscm);
     let s0 = admm::AdmmState::from_uv(&p, &m.faces, &lscm);
     let mu = 100.0 / p.n_faces() as f64;
+    let factor = admm::cpu::penalty_factors(Energy::SymmetricDirichlet, &p.weight, &s0.a);
     let mut exec = CpuExecutor::new(&p, Energy::SymmetricDirichlet, 1);
-    exec.upload(&s0).expect("upload");
+    exec.upload(&s0, &factor).expect("upload");
     exec.iterate(5, mu).expect("iterate");
     let batched = exec.download().expect("download");
-    // The executor's penalty factors: computed from the uploaded iterate.
-    let factor = admm::cpu::penalty_factors(Energy::SymmetricDirichlet, &p.weight, &s0.a);
     let pen = admm::cpu::Penalty {
         mu,
         factor: &factor,

@@ -32,7 +32,7 @@ impl<F: FnMut(usize, f64) -> (f64, f64, f64)> Executor for Scripted<F> {
     fn device(&self) -> String {
         "script".into()
     }
-    fn upload(&mut self, state: &AdmmState) -> foldfree::Result<()> {
+    fn upload(&mut self, state: &AdmmState, _penalty: &[f64]) -> foldfree::Result<()> {
         self.state = Some(state.clone());
         self.uploads += 1;
         Ok(())
@@ -194,6 +194,47 @@ fn balancing_never_returns_below_a_mu_that_stalled() {
         "μ went back under the stalled value: {mu_seen:?}"
     );
     assert!(mu_seen.iter().all(|&m| m <= 2.0 * threshold));
+}
+
+/// Residual balancing's decrease is a trial. Here μ·F 50 is below the stability threshold: the
+/// consensus that was tight at 100 is lost at once (the primal residual over its tolerance). The
+/// driver restores the iterate and μ it left, never goes under that μ again, and the run then
+/// converges at 100 instead of stalling at its cap.
+#[test]
+fn a_balancing_decrease_that_loses_the_consensus_is_rolled_back() {
+    let mut opts = AdmmOptions::for_energy(Energy::SymmetricDirichlet);
+    opts.mu_rel = Some(100.0);
+    opts.max_iters = 200 * opts.check_every;
+    let (r, exec) = run_scaled(
+        &opts,
+        |k, mu_rel| {
+            if mu_rel < 100.0 {
+                (1e-3, 1e-3, 2.0)
+            } else if k < 60 {
+                // Tight consensus, maps still moving: balancing wants a smaller μ.
+                (1e-6, 1e-3, 2.0 + 1e-2 * (k as f64).sin())
+            } else {
+                (1e-6, 1e-6, 2.0)
+            }
+        },
+        None,
+    );
+    assert!(r.converged(), "{}", r.stop_summary());
+    assert_eq!(r.balance_rollbacks, 1);
+    assert_eq!(exec.uploads, 2, "the start and the restored iterate");
+    let low = exec
+        .mu_seen
+        .iter()
+        .position(|&m| m < 100.0)
+        .expect("balancing tried a smaller μ");
+    assert_eq!(
+        exec.mu_seen.iter().filter(|&&m| m < 100.0).count(),
+        1,
+        "one check at the lost μ, then never again: {:?}",
+        exec.mu_seen
+    );
+    assert!(r.history[low].rolled_back);
+    assert!(r.iterations < opts.max_iters / 2);
 }
 
 /// Without any stall, balancing halves μ down to its bound (initial ÷ `mu_shrink_max`) while the

@@ -202,7 +202,7 @@ fn random_state(problem: &AdmmProblem, seed: u64) -> AdmmState {
     AdmmState { a, y, lambda }
 }
 
-/// The penalty factors the executor computes at an upload of `a`, as the device stores them.
+/// The penalty factors uploaded with `a`, as the device stores them.
 fn device_penalties(energy: Energy, p: &AdmmProblem, a: &[[f64; 4]]) -> Vec<f64> {
     cpu::penalty_factors(energy, &p.weight, a)
         .into_iter()
@@ -953,12 +953,13 @@ fn one_executor_iteration_matches_cpu_iteration() {
                     let what = format!("iteration {energy:?} iters {iters} {}", c.label);
                     let mut exec = VulkanExecutor::new(ctx, &c.problem, energy, iters, false, None)
                         .expect("executor");
-                    exec.upload(&c.state).expect("upload");
+                    let uploaded = cpu::penalty_factors(energy, &c.problem.weight, &c.state.a);
+                    exec.upload(&c.state, &uploaded).expect("upload");
                     let r_gpu = exec.iterate(1, mu).expect("iterate");
                     let g = exec.download().expect("download");
                     drop(exec);
 
-                    // The executor's own penalties: computed from the uploaded A, stored in f32.
+                    // The uploaded penalties, as the device stores them (f32).
                     let factor = device_penalties(energy, &c.problem, &c.state.a);
                     let pen = Penalty {
                         mu,
@@ -1160,8 +1161,9 @@ fn sliced_staged_executor_matches_the_plain_one_bit_for_bit() {
         let opts = AdmmOptions::for_energy(energy);
         let mu = opts.initial_mu_rel() / fx.problem.n_faces() as f64;
         let state = AdmmState::from_uv(&fx.problem, &fx.mesh.faces, &fx.lscm);
+        let factors = cpu::penalty_factors(energy, &fx.problem.weight, &state.a);
         let run = |exec: &mut dyn Executor| {
-            exec.upload(&state).expect("upload");
+            exec.upload(&state, &factors).expect("upload");
             let mut residuals = Vec::new();
             for _ in 0..3 {
                 let r = exec.iterate(7, mu).expect("iterate");

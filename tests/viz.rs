@@ -313,6 +313,7 @@ fn convergence_plots_of_synthetic_history() {
             recovered_energy: (k % 10 == 0).then_some(2.0 + 1.1 / k as f64),
             accel_accepted: None,
             accel_rejected: None,
+            rolled_back: false,
         })
         .collect();
     let svg = viz::convergence_svg(&history);

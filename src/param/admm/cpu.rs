@@ -451,9 +451,9 @@ impl Executor for CpuExecutor<'_> {
         format!("host CPU ({} threads, f64)", rayon::current_num_threads())
     }
 
-    fn upload(&mut self, state: &AdmmState) -> crate::Result<()> {
+    fn upload(&mut self, state: &AdmmState, penalty: &[f64]) -> crate::Result<()> {
         self.state = state.clone();
-        self.penalty = penalty_factors(self.energy, &self.problem.weight, &self.state.a);
+        self.penalty = penalty.to_vec();
         if let Some(acc) = self.accel.as_mut() {
             acc.reset();
         }

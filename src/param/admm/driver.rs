@@ -47,8 +47,10 @@ pub trait Executor {
     fn backend(&self) -> &'static str;
     /// Human-readable device name.
     fn device(&self) -> String;
-    /// Replaces the iterate.
-    fn upload(&mut self, state: &AdmmState) -> crate::Result<()>;
+    /// Replaces the iterate and the #F per-face penalty factors `m_f` (face `f`'s penalty is
+    /// `μ m_f`, [`super::cpu::penalty_factors`]). The driver owns the factors: they belong to
+    /// the map they were derived from, and a restored iterate must keep the ones it ran with.
+    fn upload(&mut self, state: &AdmmState, penalty: &[f64]) -> crate::Result<()>;
     /// Reads the iterate back.
     fn download(&mut self) -> crate::Result<AdmmState>;
     /// Runs `n ≥ 1` iterations with penalty `mu`; residuals of the last one.
@@ -315,6 +317,10 @@ pub struct History {
     pub accel_accepted: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub accel_rejected: Option<usize>,
+    /// At this check the last residual-balancing decrease of μ was undone (its iterate and μ
+    /// restored): it had lost the consensus.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub rolled_back: bool,
 }
 
 /// Why [`solve`] returned.
@@ -351,6 +357,8 @@ pub struct AdmmResult {
     /// The tolerances the stop test used (for [`AdmmResult::stop_summary`]).
     pub tol_primal: f64,
     pub tol_dual: f64,
+    /// Residual-balancing decreases of μ undone because they lost the consensus.
+    pub balance_rollbacks: usize,
 }
 
 impl AdmmResult {
@@ -509,10 +517,9 @@ pub fn solve(
     };
 
     let state = AdmmState::from_uv(problem, faces, init_uv);
-    exec.upload(&state)?;
-    // The penalty factors the executor derived from the uploaded iterate (it computes the same
-    // at every upload): the stop test checks that they still describe the map.
+    // The penalty factors of the uploaded map: the stop test checks that they still describe it.
     let mut factors = super::cpu::penalty_factors(opts.energy, &problem.weight, &state.a);
+    exec.upload(&state, &factors)?;
     let accelerating = opts.accel != Accel::None;
     exec.set_accel_active(accelerating && opts.aa_start() == 0);
 
@@ -550,8 +557,12 @@ pub fn solve(
     let mut since_resync = 0usize;
     // Consecutive checks with the energy change under tolerance.
     let mut calm_checks = 0usize;
-    // Lowest μ·F residual balancing may go to (raised when μ had to be raised on a stall).
+    // Lowest μ·F residual balancing may go to (raised when μ had to be raised on a stall, or a
+    // decrease was rolled back).
     let mut mu_floor = 0.0f64;
+    // The last balancing decrease, until it has held for a stall window.
+    let mut trial: Option<BalanceTrial> = None;
+    let mut rollbacks = 0usize;
     while it < opts.max_iters {
         if opts
             .stop
@@ -591,8 +602,34 @@ pub fn solve(
             recovered_energy: None,
             accel_accepted: exec.accel_stats().map(|s| s.0),
             accel_rejected: exec.accel_stats().map(|s| s.1),
+            rolled_back: false,
         };
 
+        if let Some(t) = trial.take() {
+            if primal > opts.tol_primal {
+                // The decrease lost the consensus it was made on (the primal residual was under
+                // a quarter of its tolerance and is now over it): μ went below the stability
+                // threshold, where the iteration oscillates away from the fixed point instead
+                // of moving along it. Go back to the iterate and μ it left, and never below
+                // that μ again.
+                exec.upload(&t.state, &factors)?;
+                mu_rel = t.mu_rel;
+                mu_floor = mu_floor.max(t.mu_rel);
+                rollbacks += 1;
+                prev_energy = f64::NAN;
+                calm_checks = 0;
+                best_primal = f64::INFINITY;
+                checks_since_best = 0;
+                checks_since_change = 0;
+                h.rolled_back = true;
+                progress(&h);
+                history.push(h);
+                continue;
+            }
+            if checks_since_change < opts.stall_checks() {
+                trial = Some(t);
+            }
+        }
         if energy_change < opts.tol_energy {
             calm_checks += 1;
         } else {
@@ -634,7 +671,7 @@ pub fn solve(
                     // multipliers are kept: they do not depend on the penalty).
                     let mut synced = synced;
                     synced.lambda = st.lambda.clone();
-                    exec.upload(&synced)?;
+                    exec.upload(&synced, &now)?;
                     factors = now;
                     refreshed = true;
                 } else {
@@ -651,7 +688,7 @@ pub fn solve(
                 let mut synced = AdmmState::from_uv(problem, faces, &uv);
                 synced.lambda = st.lambda;
                 factors = super::cpu::penalty_factors(opts.energy, &problem.weight, &synced.a);
-                exec.upload(&synced)?;
+                exec.upload(&synced, &factors)?;
             }
             if refreshed {
                 // A new metric: the stop test starts over.
@@ -702,6 +739,15 @@ pub fn solve(
             // it. While accelerating, the extrapolated consensus can tighten long before the
             // energy has settled (each μ change drops the Anderson history);
             // `aa_balance_energy` can make balancing wait for the energy change too.
+            //
+            // Where the stability threshold lies is not known in advance (it depends on the
+            // curvature of the faces the consensus binds), so the decrease is a trial: the
+            // iterate before it is kept until the consensus has held for a stall window, and
+            // restored if the primal residual rises over its tolerance meanwhile.
+            trial = Some(BalanceTrial {
+                state: exec.download()?,
+                mu_rel,
+            });
             mu_rel /= 2.0;
             best_primal = primal;
             checks_since_best = 0;
@@ -728,5 +774,12 @@ pub fn solve(
         device: exec.device(),
         tol_primal: opts.tol_primal,
         tol_dual: opts.tol_dual,
+        balance_rollbacks: rollbacks,
     })
+}
+
+/// A residual-balancing decrease of μ on trial: the iterate and μ·F before it.
+struct BalanceTrial {
+    state: AdmmState,
+    mu_rel: f64,
 }

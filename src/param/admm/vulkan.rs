@@ -91,8 +91,6 @@ pub struct VulkanExecutor {
     partials: Buffer,
     /// #F penalty factors `m_f`, written at every upload.
     penalty: Buffer,
-    /// #F face weights `w_f` (for the penalty factors).
-    weights: Vec<f64>,
     kernels: Kernels,
     recorder: Recorder,
     profile: Option<(TimestampPool, KernelTimes)>,
@@ -322,7 +320,6 @@ impl VulkanExecutor {
             lambda,
             partials,
             penalty,
-            weights: problem.weight.clone(),
             kernels: Kernels {
                 face: (face_pipe, face_set),
                 edge: (edge_pipe, edge_set),
@@ -654,9 +651,8 @@ impl Executor for VulkanExecutor {
         self.ctx.device_name().to_string()
     }
 
-    fn upload(&mut self, state: &AdmmState) -> crate::Result<()> {
+    fn upload(&mut self, state: &AdmmState, factors: &[f64]) -> crate::Result<()> {
         let (a, y, lambda) = (self.a.clone(), self.y.clone(), self.lambda.clone());
-        let factors = super::cpu::penalty_factors(self.energy, &self.weights, &state.a);
         let penalty = self.penalty.clone();
         self.put(
             &penalty,
