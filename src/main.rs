@@ -547,8 +547,9 @@ struct ParamArgs {
     /// At most this many extra seams, each to the tip a conformal map shrinks most.
     #[arg(long, default_value_t = 8)]
     extra_seams: usize,
-    /// At most this many seams splitting charts whose map's boundary overlaps itself
-    /// (the map is then injective per chart; 0 keeps overlapping charts).
+    /// At most this many seams splitting charts whose map's boundary overlaps itself; a chart
+    /// still overlapping after them is cut into pieces that keep their map (every chart is
+    /// then injective; 0 keeps overlapping charts).
     #[arg(long, default_value_t = 16)]
     overlap_splits: usize,
     /// Extra seams are cut while some vertex's area shrinks more than this factor.
@@ -1211,6 +1212,12 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
             100.0 * a.packing_efficiency,
             100.0 * a.texel_coverage
         );
+        if a.overlap_splits + a.injective_pieces > 0 {
+            eprintln!(
+                "  charts whose map overlapped itself: {} split by a seam and re-mapped, {} more cut into pieces that keep their map",
+                a.overlap_splits, a.injective_pieces
+            );
+        }
     }
     if let Some(t) = &r.kernel_times {
         let per = |ns: u64| ns as f64 / 1e3 / t.iterations.max(1) as f64;

@@ -144,5 +144,9 @@ pub struct AtlasReport {
     /// Charts split because their map's boundary overlapped itself
     /// (`CutOptions::overlap_splits`).
     pub overlap_splits: usize,
+    /// Charts added by splitting charts whose map still overlapped itself after those seams
+    /// into pieces that do not overlap, each keeping its part of the map
+    /// ([`crate::param::injective`]).
+    pub injective_pieces: usize,
     pub seconds_cut: f64,
 }

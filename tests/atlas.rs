@@ -331,6 +331,26 @@ fn chart_overlapping_itself_is_split_until_injective() {
     assert!(r0["boundary_self_intersections"].as_u64().expect("n") > 0);
 }
 
+/// With a budget of one seam the block's chart still overlaps after it; the last resort cuts
+/// what overlaps into pieces that keep their map: no crossing, no flip, the same energy
+/// as without any split (pieces are not re-mapped).
+#[test]
+fn a_chart_still_overlapping_after_its_seams_is_cut_into_pieces() {
+    let dir = TempDir::new("atlas_pieces");
+    let args = ["--solver", "global", "--energy", "sd", "--overlap-splits", "1"];
+    let r = check_atlas(&data("block"), &dir, &args, None);
+    assert_eq!(r["boundary_self_intersections"], 0);
+    assert_eq!(r["flips"], 0);
+    assert_eq!(r["atlas"]["overlap_splits"], 1);
+    let pieces = r["atlas"]["injective_pieces"].as_u64().expect("pieces");
+    assert!(pieces >= 1, "{}", r["atlas"]);
+    assert_eq!(
+        r["atlas"]["charts"].as_u64().expect("charts"),
+        2 + pieces,
+        "one chart, one seam, then pieces"
+    );
+}
+
 #[test]
 fn closed_genus0_bunny_becomes_one_disk() {
     let dir = TempDir::new("atlas_bunny");

@@ -54,10 +54,14 @@ pub(crate) fn run_atlas(
         profile: job.profile,
         ..OnDevice::new(ctx)
     });
+    // Charts split into injective pieces (the last resort, [`crate::param::injective`]).
+    let mut pieces_made = 0usize;
+    let mut pieces_tried = false;
     let maps = loop {
         let mut maps = Vec::with_capacity(cutm.charts.len());
         let mut new_splits = Vec::new();
-        for faces in &cutm.charts {
+        let mut overlapping = Vec::new();
+        for (c, faces) in cutm.charts.iter().enumerate() {
             let (sub, global) = cutm.chart_mesh(faces);
             let sub_topo = Topology::build(&sub, &job.input)?;
             let map = match cache.remove(faces) {
@@ -72,9 +76,15 @@ pub(crate) fn run_atlas(
                     progress,
                 )?,
             };
-            let candidates = overlap_splits(&map.uv, &sub_topo, &global, &cutm.origin, faces);
-            if !candidates.is_empty() {
-                new_splits.push(candidates);
+            if !metrics::boundary_intersecting_pairs(&map.uv, &sub_topo.boundary_loops).is_empty() {
+                overlapping.push(c);
+                new_splits.push(overlap_splits(
+                    &map.uv,
+                    &sub_topo,
+                    &global,
+                    &cutm.origin,
+                    faces,
+                ));
             }
             maps.push(map);
         }
@@ -96,13 +106,47 @@ pub(crate) fn run_atlas(
                 failed.push(sp);
             }
         }
+        let keep_overlaps = job.cut_options.overlap_splits == 0;
+        if splits.len() == before && (overlapping.is_empty() || pieces_tried || keep_overlaps) {
+            break maps; // nothing overlaps (or nothing more can be done about it)
+        }
+        let mut kept: Vec<(Vec<u32>, MapOutput)> = Vec::new();
         if splits.len() == before {
-            break maps; // nothing overlaps, or no seam could split what does
+            // No seam could split what overlaps, or the budget is spent: split each
+            // overlapping chart into pieces that do not overlap, keeping its map.
+            pieces_tried = true;
+            for (c, (faces, map)) in cutm.charts.iter().zip(maps).enumerate() {
+                if !overlapping.contains(&c) {
+                    cache.insert(faces.clone(), map);
+                    continue;
+                }
+                let (sub, _) = cutm.chart_mesh(faces);
+                let piece = crate::param::injective::injective_pieces(&map.uv, &sub.faces);
+                for (i, &f) in faces.iter().enumerate() {
+                    for &e in &topo.face_edges[f as usize] {
+                        let [g0, g1] = topo.edge_faces[e as usize];
+                        let g = if g0 == f { g1 } else { g0 };
+                        if let Ok(j) = faces.binary_search(&g) {
+                            if piece[i] != piece[j] {
+                                base.cut_edge(e);
+                            }
+                        }
+                    }
+                }
+                pieces_made += piece.iter().max().map_or(0, |&m| m as usize);
+                kept.push((faces.clone(), map));
+            }
+        } else {
+            for (faces, map) in cutm.charts.iter().zip(maps) {
+                cache.insert(faces.clone(), map);
+            }
         }
         let recut = base.finish(&input, topo, &job.input)?;
         seconds_cut += t.elapsed().as_secs_f64();
-        for (faces, map) in cutm.charts.iter().zip(maps) {
-            cache.insert(faces.clone(), map);
+        for (faces, map) in kept {
+            for (piece_faces, piece_map) in pieces_of(&cutm, &recut, &faces, map) {
+                cache.insert(piece_faces, piece_map);
+            }
         }
         cutm = recut;
     };
@@ -228,6 +272,7 @@ pub(crate) fn run_atlas(
         seconds_pack,
         extra_seams: extra.len(),
         overlap_splits: splits.len(),
+        injective_pieces: pieces_made,
         seconds_cut,
     });
     report.seconds_load = t_load;
@@ -239,6 +284,55 @@ pub(crate) fn run_atlas(
         uv,
         report,
     })
+}
+
+/// The charts of `recut` that came from splitting the chart `faces` of `old` into injective
+/// pieces, each with the part of the chart's map `map` on its faces (corner by corner: a piece
+/// is a disk cut out of the chart, so its vertices are chart vertices). The largest piece
+/// carries the chart's solver record (iterations, path, stop test); the others have none.
+fn pieces_of(
+    old: &crate::param::cut::CutMesh,
+    recut: &crate::param::cut::CutMesh,
+    faces: &[u32],
+    map: MapOutput,
+) -> Vec<(Vec<u32>, MapOutput)> {
+    let (sub, _) = old.chart_mesh(faces);
+    let corner_uv = |i: usize| sub.faces[i].map(|v| map.uv[v as usize]);
+    let mut out: Vec<(Vec<u32>, MapOutput)> = recut
+        .charts
+        .iter()
+        .filter(|c| c.first().is_some_and(|f| faces.binary_search(f).is_ok()))
+        .map(|c| {
+            let (piece, _) = recut.chart_mesh(c);
+            let mut uv = vec![[0.0; 2]; piece.positions.len()];
+            for (k, &f) in c.iter().enumerate() {
+                let i = faces
+                    .binary_search(&f)
+                    .expect("a piece's faces are its chart's");
+                for (&v, p) in piece.faces[k].iter().zip(corner_uv(i)) {
+                    uv[v as usize] = p;
+                }
+            }
+            let record = MapOutput {
+                uv,
+                init_flips: 0,
+                admm: None,
+                global: None,
+                start_proxy_iterations: 0,
+                path: SolverPath::None,
+                kernel_times: None,
+                bytes_per_iteration: None,
+                seconds_init: 0.0,
+                seconds_solve: 0.0,
+            };
+            (c.clone(), record)
+        })
+        .collect();
+    if let Some(largest) = out.iter_mut().max_by_key(|(c, _)| c.len()) {
+        let uv = std::mem::take(&mut largest.1.uv);
+        largest.1 = MapOutput { uv, ..map };
+    }
+    out
 }
 
 /// Where to split a chart whose UV boundary crosses itself: for each of the first few

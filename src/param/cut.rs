@@ -46,8 +46,9 @@ pub struct CutOptions {
     /// Area ratio (chart-normalised 3D area over UV area around a vertex) above which a vertex
     /// gets an extra seam.
     pub stretch_limit: f64,
-    /// At most this many splitting seams across charts whose map's boundary overlaps itself
-    /// (0: overlapping charts are kept as they are).
+    /// At most this many splitting seams across charts whose map's boundary overlaps itself;
+    /// a chart that still overlaps after them is cut into pieces that do not, keeping its map
+    /// ([`crate::param::injective`]). 0: overlapping charts are kept as they are.
     pub overlap_splits: usize,
 }
 
@@ -173,6 +174,13 @@ impl BaseCut {
     /// a chord of its disk chart, so the chart count grows by one exactly when this is true.
     pub fn try_split(&mut self, topo: &Topology, sp: &Split) -> bool {
         add_split_seam(topo, &self.weights, &mut self.cut, sp)
+    }
+
+    /// Cuts the interior edge `e` (an index into the topology's `edges`): a seam between two
+    /// pieces of a chart ([`crate::param::injective`]), which keeps every chart a disk when the
+    /// pieces are disks.
+    pub fn cut_edge(&mut self, e: u32) {
+        self.cut[e as usize] = true;
     }
 
     /// Splits the mesh along the cut into charts and checks each is a disk.

@@ -8,6 +8,7 @@ pub mod atlas;
 pub mod cut;
 pub mod energy;
 pub mod global;
+pub mod injective;
 pub mod job;
 pub mod map;
 pub mod pack;
