@@ -337,7 +337,14 @@ fn chart_overlapping_itself_is_split_until_injective() {
 #[test]
 fn a_chart_still_overlapping_after_its_seams_is_cut_into_pieces() {
     let dir = TempDir::new("atlas_pieces");
-    let args = ["--solver", "global", "--energy", "sd", "--overlap-splits", "1"];
+    let args = [
+        "--solver",
+        "global",
+        "--energy",
+        "sd",
+        "--overlap-splits",
+        "1",
+    ];
     let r = check_atlas(&data("block"), &dir, &args, None);
     assert_eq!(r["boundary_self_intersections"], 0);
     assert_eq!(r["flips"], 0);
