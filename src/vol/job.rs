@@ -125,6 +125,24 @@ pub fn constraints_for(
     }
 }
 
+/// `--target ball` maps the rest onto the unit sphere of its own coordinates, so the rest's
+/// size is part of the problem: beyond 1e±100 the map's Jacobians (≈ 1/size) make the
+/// distortion ‖J‖² + ‖J⁻¹‖² overflow f64 (1e±300 squared), and no solve can succeed. That is
+/// the input's units, refused up front, not a solver failure after the work.
+fn ball_scale_in_range(rest: &TetMesh, path: &Path) -> Result<(), VolError> {
+    let f = Scale::fit(&rest.positions).factor;
+    // 2^±340 ≈ 2e±102: every mesh between 1e-100 and 1e100 across passes (the factor is the
+    // power of two at or above its largest coordinate).
+    if !(2f64.powi(-340)..=2f64.powi(340)).contains(&f) {
+        return Err(VolError::Input(format!(
+            "{}: --target ball maps onto the unit sphere, but the mesh is about {f:.0e} across: \
+             the map's distortion would overflow; scale the mesh to between 1e-100 and 1e100",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Runs a job end to end and returns the report. Every output (the map, its TetGen pair, the
 /// report, the constraints met) is checked before the work and committed together after the
 /// written map was re-read and checked; on any error nothing is written.
@@ -159,6 +177,15 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         ConstraintSource::Ball => Scale::default(),
         _ => Scale::fit(&rest_file.positions),
     };
+    if job.constraints == ConstraintSource::Ball {
+        ball_scale_in_range(&rest_file, &job.rest)?;
+    }
+    // Problems of the input found while solving (a boundary surface that is not a sphere, a
+    // degenerate tet) name the rest file, as the reader's errors do.
+    let locate = |e: VolError| match e {
+        VolError::Input(msg) => VolError::Input(format!("{}: {msg}", job.rest.display())),
+        e => e,
+    };
     let scaled = |p: &[[f64; 3]]| -> Vec<[f64; 3]> { p.iter().map(|&q| scale.apply(q)).collect() };
     let rest = TetMesh {
         positions: scaled(&rest_file.positions),
@@ -169,7 +196,8 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     let mut sliding = None;
     let (init, targets) = match &job.constraints {
         ConstraintSource::Ball => {
-            let (start, t, bad) = ball_target(&rest, job.options.sphere_relax.as_ref())?;
+            let (start, t, bad) =
+                ball_target(&rest, job.options.sphere_relax.as_ref()).map_err(locate)?;
             sphere_bad = Some(bad);
             let start = init_pos.unwrap_or(start);
             match &job.options.untangle {
@@ -181,7 +209,8 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
                         u,
                         job.options.ball_relax.as_ref(),
                         ctx.as_ref(),
-                    )?;
+                    )
+                    .map_err(locate)?;
                     let ok = s.inverted_left == 0;
                     sliding = Some(s);
                     if ok {
@@ -234,7 +263,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         },
     );
     bar.finish_and_clear();
-    let (x, mut run) = out?;
+    let (x, mut run) = out.map_err(locate)?;
     if let Some(ctx) = &ctx {
         ctx.check_validation_messages()?;
     }

@@ -207,6 +207,11 @@ pub fn parse_node(text: &str, file: &Path) -> Result<NodeFile, VolError> {
                 vertex: i,
             });
         }
+        // Attributes are not used, but a field that is not a number means the record is not
+        // what the header says it is.
+        for k in 0..nattr {
+            num::<f64>(t.get(4 + k), file, l, "a point attribute")?;
+        }
         let r = if nmark > 0 {
             num(t.get(4 + nattr), file, l, "a boundary marker")?
         } else {
