@@ -1094,3 +1094,24 @@ fn a_map_that_overflows_the_file_units_is_bad_input_not_a_solver_failure() {
     assert!(!dir.join("o.obj").exists());
     run(&dir, &["stats", "s.obj"]).expect(0, "");
 }
+
+#[test]
+fn a_constraint_target_beyond_1e100_times_the_mesh_is_bad_input() {
+    // Was exit 1 after the work ("Newton start has ... a non-finite value").
+    let dir = scratch("far_target", &["cube_5tets.mesh"]);
+    fs::write(dir.join("c.txt"), "0 0 0 0\n7 1e300 1e300 1e300\n").unwrap();
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--constraints",
+            "c.txt",
+            "-q",
+            "-o",
+            "o.mesh",
+        ],
+    )
+    .expect(2, "c.txt: the target of vertex 7");
+    assert!(!dir.join("o.mesh").exists());
+}

@@ -224,9 +224,22 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         }
         src => {
             let mut t = constraints_for(&rest, init_pos.as_deref(), src)?;
-            if matches!(src, ConstraintSource::File(_)) {
+            if let ConstraintSource::File(path) = src {
                 for (_, p) in &mut t {
                     *p = scale.apply(*p);
+                }
+                // At unit scale a target 1e100 away has a squared distance of 1e200, and the
+                // penalty energy multiplies that again: further out it overflows and no
+                // fold-free map can be found (was exit 1 after the work). The file's fault.
+                if let Some((v, p)) = t.iter().find(|(_, p)| p.iter().any(|c| c.abs() > 1e100)) {
+                    return Err(VolError::Input(format!(
+                        "{}: the target of vertex {v} ({:e}, {:e}, {:e}) is more than 1e100 \
+                         times the rest mesh's size away; its squared distance overflows f64",
+                        path.display(),
+                        scale.invert(*p)[0],
+                        scale.invert(*p)[1],
+                        scale.invert(*p)[2]
+                    )));
                 }
             }
             let init = match init_pos {

@@ -425,6 +425,10 @@ pub fn tet_input(outputs: &mut Outputs, path: &Path) {
 
 /// Plans a tet mesh output (both files of a TetGen pair) in a run's outputs.
 pub fn tet_output(outputs: &mut Outputs, path: &Path, what: &str) -> Result<(), VolError> {
+    // An unknown extension is an output path problem: the policy's message, not the reader's.
+    if format_of(path).is_err() {
+        outputs.output(path, what, &["mesh", "node", "ele"])?;
+    }
     for f in files_of(path)? {
         outputs.output(&f, what, &["mesh", "node", "ele"])?;
     }
