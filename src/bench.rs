@@ -30,12 +30,75 @@ pub struct BenchRow {
     pub report: ParamReport,
 }
 
-/// Runs every combination; a failed run becomes a row with the error text.
-pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<BenchRow>, String)> {
-    std::fs::create_dir_all(&job.out_dir).map_err(|source| crate::Error::Io {
+/// What [`run_bench`] produced: the rows that ran, the Markdown table, and the first failed
+/// run's error (its row has the error text; the CLI exits with its code after the table, so a
+/// failed run is never a silent exit 0).
+pub struct BenchOutcome {
+    pub rows: Vec<BenchRow>,
+    pub table: String,
+    pub first_error: Option<crate::Error>,
+}
+
+/// The output of one (mesh, energy, backend) run.
+fn out_path(
+    job: &BenchJob,
+    mesh: &std::path::Path,
+    energy: Energy,
+    backend: BackendChoice,
+) -> PathBuf {
+    let stem = mesh
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let tag = format!("{stem}-{energy:?}-{backend:?}").to_lowercase();
+    job.out_dir.join(format!("{tag}.obj"))
+}
+
+/// Runs every combination; a failed run becomes a row with the error text. Before any run,
+/// as for every command: each mesh must be a readable regular file, the output folder must
+/// be (or become) a folder, and no run's output may be one of the meshes or another run's
+/// output (by file identity) — a later mesh of the list was otherwise replaced by an earlier
+/// run's map.
+pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<BenchOutcome> {
+    use crate::files::{FileError, Outputs};
+    for mesh in &job.meshes {
+        let meta = std::fs::metadata(mesh).map_err(|e| FileError::Unreadable {
+            path: mesh.clone(),
+            reason: e.to_string(),
+        })?;
+        if !meta.is_file() {
+            return Err(FileError::Unreadable {
+                path: mesh.clone(),
+                reason: "not a regular file (a pipe, socket, device or folder)".into(),
+            }
+            .into());
+        }
+    }
+    if job.out_dir.exists() && !job.out_dir.is_dir() {
+        return Err(FileError::BadOutput {
+            path: job.out_dir.clone(),
+            what: "output folder".into(),
+            reason: "it exists and is not a folder".into(),
+        }
+        .into());
+    }
+    std::fs::create_dir_all(&job.out_dir).map_err(|e| FileError::BadOutput {
         path: job.out_dir.clone(),
-        source,
+        what: "output folder".into(),
+        reason: e.to_string(),
     })?;
+    let mut plan = Outputs::new();
+    for mesh in &job.meshes {
+        plan.input(mesh);
+    }
+    for mesh in &job.meshes {
+        for &energy in &job.energies {
+            for &backend in &job.backends {
+                plan.output(&out_path(job, mesh, energy, backend), "map", &["obj"])?;
+            }
+        }
+    }
+    let mut first_error = None;
     let mut rows = Vec::new();
     let mut table = String::from(
         "| mesh | faces | energy | backend | iterations | converged | s/iteration | MB/iteration | GB/s achieved | solve s | total s | δcon mean | SD | flips |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
@@ -47,8 +110,7 @@ pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<Bench
             .unwrap_or_default();
         for &energy in &job.energies {
             for &backend in &job.backends {
-                let tag = format!("{stem}-{energy:?}-{backend:?}").to_lowercase();
-                let mut pj = ParamJob::new(mesh, job.out_dir.join(format!("{tag}.obj")));
+                let mut pj = ParamJob::new(mesh, out_path(job, mesh, energy, backend));
                 pj.backend = backend;
                 pj.admm = AdmmOptions::for_energy(energy);
                 if let Some(n) = job.max_iters {
@@ -98,12 +160,17 @@ pub fn run_bench(job: &BenchJob, mut log: impl FnMut(&str)) -> Result<(Vec<Bench
                         );
                         log(&line);
                         let _ = writeln!(table, "{line}");
+                        first_error.get_or_insert(e);
                     }
                 }
             }
         }
     }
-    Ok((rows, table))
+    Ok(BenchOutcome {
+        rows,
+        table,
+        first_error,
+    })
 }
 
 /// Measured device memory bandwidth in GB/s: `y = a·x + y` over `n` floats (12 bytes moved per

@@ -262,12 +262,17 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
     let r = run_volmap_job(&job)?;
     let q = &r.written;
     eprintln!(
-        "foldfree volmap: {} tets, inverted init {} → output {}; δ_t {:.4} (free tets {:.4}, {} pinned), max {:.3e}, ρ {:.3e}{}, {:.2} s",
+        "foldfree volmap: {} tets, inverted init {} → output {}; δ_t {:.4} ({}, {} pinned), max {:.3e}, ρ {:.3e}{}, {:.2} s",
         q.tets,
         r.run.inverted_init,
         q.inverted,
         q.delta_t,
-        q.delta_t_free,
+        // Every tet pinned: there is no free-tet mean to print (it is NaN, `null` in JSON).
+        if q.delta_t_free.is_finite() {
+            format!("free tets {:.4}", q.delta_t_free)
+        } else {
+            "no free tets".to_string()
+        },
         q.pinned_tets,
         q.max_distortion,
         q.rho,
@@ -311,11 +316,7 @@ fn run_volmap_constraints(a: VolConstraintArgs) -> foldfree::Result<()> {
     let mut outputs = Outputs::new();
     foldfree::vol::tetgen::tet_input(&mut outputs, &a.rest);
     outputs.output(&a.output, "constraints", &[])?;
-    if !(0.0..0.5).contains(&a.fraction) || !a.twist.is_finite() {
-        return Err(foldfree::Error::Usage(
-            "--fraction must be in [0, 0.5) and --twist finite".into(),
-        ));
-    }
+    foldfree::vol::constraints::check_twist(a.twist, a.fraction)?;
     let rest = foldfree::vol::job::read_rest(&a.rest, a.max_tets)?;
     let c = twist_constraints(&rest, a.twist, a.fraction);
     let header = format!(
@@ -767,10 +768,28 @@ fn surface_corners(path: &std::path::Path, max_elements: usize) -> foldfree::Res
     } else {
         mesh::read_surface(path, max_elements)?.0
     };
+    // Any surface is drawn, valid or not, but not NaN or infinite corners (nothing, or
+    // garbage, would be drawn and the picture still written); positions go to unit scale
+    // before they become f32, whose range ends at 3.4e38.
+    if let Some(v) = m
+        .positions
+        .iter()
+        .position(|p| !p.iter().all(|c| c.is_finite()))
+    {
+        return Err(foldfree::Error::Mesh(mesh::MeshError::NonFinite {
+            file: path.to_path_buf(),
+            vertex: v,
+            value: m.positions[v]
+                .into_iter()
+                .find(|c| !c.is_finite())
+                .unwrap_or(f64::NAN),
+        }));
+    }
+    let unit = mesh::Scale::fit(&m.positions);
     let mut positions = Vec::with_capacity(3 * m.faces.len());
     for f in &m.faces {
         for &v in f {
-            let p = m.positions[v as usize];
+            let p = unit.apply(m.positions[v as usize]);
             positions.push([p[0] as f32, p[1] as f32, p[2] as f32]);
         }
     }
@@ -967,9 +986,10 @@ fn run_bench(
             ctx.device_name()
         );
     }
-    let (_, table) = foldfree::bench::run_bench(&job, |line| eprintln!("{line}"))?;
-    println!("{table}");
-    Ok(())
+    let out = foldfree::bench::run_bench(&job, |line| eprintln!("{line}"))?;
+    println!("{}", out.table);
+    // A failed run is in the table, and its error decides the exit code.
+    out.first_error.map_or(Ok(()), Err)
 }
 
 fn run_profile(
@@ -1124,22 +1144,9 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         texels_per_unit: args.texel_density,
         max_pages: args.max_pages,
     };
-    job.pack.validate()?;
-    if !(args.seam_curvature.is_finite() && args.seam_curvature >= 0.0) {
-        return Err(foldfree::Error::Usage(format!(
-            "--seam-curvature {} must be a finite number >= 0",
-            args.seam_curvature
-        )));
-    }
     job.cut_options.curvature_weight = args.seam_curvature;
     job.cut_options.extra_seams = args.extra_seams;
     job.cut_options.overlap_splits = args.overlap_splits;
-    if !(args.stretch_limit.is_finite() && args.stretch_limit >= 1.0) {
-        return Err(foldfree::Error::Usage(format!(
-            "--stretch-limit {} must be a finite number >= 1",
-            args.stretch_limit
-        )));
-    }
     job.cut_options.stretch_limit = args.stretch_limit;
 
     // A spinner with the running solver's state: ADMM's residual checks, the global solver's

@@ -308,6 +308,80 @@ const CASES: &[Case] = &[
     valid("crlf_line_endings.obj"),
     valid("cr_only_line_endings.obj"),
     valid("utf8_bom.obj"),
+    // The issue-25 audit: counts and indices at the integer limits, for every reader.
+    bad(
+        "index_2pow32_plus_4.obj",
+        "face 1 refers to vertex 4294967300, but there are only 4 vertices",
+    ),
+    bad(
+        "huge_and_tiny_coordinates.obj",
+        "face 0 is degenerate (area 0.000e0 x bbox diagonal^2, below the tolerance 1.000e-12",
+    ),
+    bad(
+        "ply_vertex_count_u64_max.ply",
+        "cannot read: line 3: element `vertex` count \"18446744073709551615\" is not a non-negative integer",
+    ),
+    bad(
+        "ply_binary_list_count_u32_max.ply",
+        "cannot read: byte 220: face 0, property `vertex_indices`: a list of 4294967295 items does not fit",
+    ),
+    bad(
+        "off_vertex_count_u64_max.off",
+        "cannot read: line 2: vertex count \"18446744073709551615\" is not a non-negative integer",
+    ),
+    valid("off_face_colour_valid.off"),
+    // A valid mesh whose map, at the mesh's size, does not fit in f64 (was exit 1 after the
+    // solve, "texture coordinate 0 is not finite").
+    Case {
+        file: "square_near_f64_max.obj",
+        param: Error(2, "in this file's units (coordinates up to"),
+        stats: Valid,
+    },
+    bad(
+        "stl_binary_count_u32_max.stl",
+        "cannot read: byte 80: the header announces 4294967295 triangles",
+    ),
+    valid("stl_binary_header_says_solid_valid.stl"),
+    bad(
+        "glb_json_chunk_length_past_end.glb",
+        "cannot read: byte 12: GLB: a chunk of 4294967280 bytes runs past the file's 552",
+    ),
+    bad(
+        "gltf_view_length_u64_max.gltf",
+        "bufferView 0 (bytes 0 + 18446744073709551615) runs past buffer 0",
+    ),
+    bad(
+        "gltf_nested_1000_deep.gltf",
+        "cannot read: not valid JSON: recursion limit exceeded",
+    ),
+    bad(
+        "vertex_count_u64_max.mesh",
+        ":9: expected a coordinate, found `Tetrahedra`",
+    ),
+    bad(
+        "tet_index_2pow32_plus_4.mesh",
+        ":11: tet 0 uses vertex index 4294967300, but there are 4 vertices",
+    ),
+    bad(
+        "unknown_section_count_u64_max.mesh",
+        ":15: file truncated: section Whatever announces 18446744073709551615 records",
+    ),
+    bad(
+        "tetgen_point_attribute_not_a_number.node",
+        ":2: expected a point attribute, found `abc`",
+    ),
+    bad(
+        "tetgen_point_attribute_not_a_number.ele",
+        ":2: expected a point attribute, found `abc`",
+    ),
+    bad(
+        "tetgen_tet_index_i64_max.node",
+        "tet 0 uses vertex index 9223372036854775807, but there are 4 vertices",
+    ),
+    bad(
+        "tetgen_tet_index_i64_max.ele",
+        "tet 0 uses vertex index 9223372036854775807, but there are 4 vertices",
+    ),
 ];
 
 fn bad_dir() -> PathBuf {

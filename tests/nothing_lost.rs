@@ -814,3 +814,304 @@ fn volmap_at_any_scale_gives_the_unit_scale_map_scaled() {
         assert!((d - delta[0]).abs() <= 1e-6 * delta[0], "δ_t {delta:?}");
     }
 }
+
+// ------------------------------------------------------------------ found by the audit
+
+#[test]
+fn a_texel_density_out_of_reach_is_a_usage_error_not_a_panic() {
+    // 1e300 asked the packer for a bitmap as large as the scaled chart (a capacity-overflow
+    // panic); 1e-300 collapsed every chart below a texel (exit 1, "flipped faces").
+    for (density, needle) in [("1e300", "more than 16384"), ("1e-300", "under one texel")] {
+        refused(
+            "texel",
+            &["two_triangles.obj"],
+            &[
+                "param",
+                "two_triangles.obj",
+                "-o",
+                "o.obj",
+                "-q",
+                "--cut",
+                "always",
+                "--texel-density",
+                density,
+            ],
+            2,
+            needle,
+        );
+    }
+}
+
+#[test]
+fn cut_and_pack_options_have_ranges_in_the_library() {
+    // `--extra-seams 18446744073709551615` ran for ever; the seam options were checked by
+    // the CLI only.
+    let mut c = foldfree::param::cut::CutOptions::default();
+    assert!(c.validate().is_ok());
+    c.extra_seams = usize::MAX;
+    assert!(c.validate().is_err());
+    c = Default::default();
+    c.curvature_weight = f64::NAN;
+    assert!(c.validate().is_err());
+    let mut p = foldfree::param::pack::PackOptions::default();
+    assert!(p.validate().is_ok());
+    p.padding = 10_000;
+    assert!(p.validate().is_err());
+    refused(
+        "seams",
+        &["block.obj"],
+        &[
+            "param",
+            "block.obj",
+            "-o",
+            "o.obj",
+            "-q",
+            "--extra-seams",
+            "18446744073709551615",
+        ],
+        2,
+        "extra_seams = 18446744073709551615 is outside its range [0, 1000]",
+    );
+}
+
+#[test]
+fn every_option_range_error_has_the_readme_shape() {
+    let dir = scratch("shape", &["block.obj", "cube_5tets.mesh"]);
+    for args in [
+        vec!["param", "block.obj", "-o", "o.obj", "--padding", "1000"],
+        vec!["param", "block.obj", "-o", "o.obj", "--resolution", "8"],
+        vec!["param", "block.obj", "-o", "o.obj", "--max-pages", "0"],
+        vec![
+            "param",
+            "block.obj",
+            "-o",
+            "o.obj",
+            "--seam-curvature",
+            "NaN",
+        ],
+        vec![
+            "param",
+            "block.obj",
+            "-o",
+            "o.obj",
+            "--stretch-limit",
+            "0.5",
+        ],
+        vec!["approx", "block.obj", "-o", "o.obj", "-k", "0"],
+        vec![
+            "approx",
+            "block.obj",
+            "-o",
+            "o.obj",
+            "-k",
+            "4",
+            "--angle",
+            "NaN",
+        ],
+        vec![
+            "volmap-constraints",
+            "cube_5tets.mesh",
+            "-o",
+            "c.txt",
+            "--twist",
+            "inf",
+        ],
+        vec![
+            "volmap-constraints",
+            "cube_5tets.mesh",
+            "-o",
+            "c.txt",
+            "--fraction",
+            "0.5",
+        ],
+    ] {
+        run(&dir, &args).expect(2, "is outside its range");
+    }
+    assert_eq!(dir.entries().len(), 2, "nothing written");
+}
+
+/// `cube_5tets.mesh` with every coordinate multiplied by `s`, written as `name`.
+fn scaled_cube(dir: &TempDir, s: f64, name: &str) {
+    let m = foldfree::vol::read_any(&data("cube_5tets.mesh")).unwrap();
+    let p: Vec<[f64; 3]> = m.positions.iter().map(|q| q.map(|c| c * s)).collect();
+    foldfree::vol::write_any(&dir.join(name), &m, &p).unwrap();
+}
+
+#[test]
+fn tet_meshes_at_1e308_and_1e_300_are_checked_at_unit_scale() {
+    // Was "rest tet 0 has zero volume (inf)" at 1e308 and "(0.000e0)" at 1e-300.
+    for s in [1e308, 1e-300] {
+        let dir = TempDir::new("tetscale");
+        scaled_cube(&dir, s, "r.mesh");
+        run(&dir, &["volcheck", "r.mesh", "--rest", "r.mesh"]).expect(0, "");
+        run(&dir, &["volmap-constraints", "r.mesh", "-o", "c.txt"]).expect(0, "wrote");
+        run(
+            &dir,
+            &[
+                "volmap",
+                "r.mesh",
+                "--constraints",
+                "c.txt",
+                "-q",
+                "-o",
+                "o.mesh",
+            ],
+        )
+        .expect(0, "no free tets");
+    }
+}
+
+#[test]
+fn ball_target_at_1e100_is_measured_at_unit_scale_and_refused_beyond() {
+    // At 1e100 the map was fold-free but its δ_t overflowed (inf), so it was not written.
+    let dir = TempDir::new("ballscale");
+    scaled_cube(&dir, 1e100, "r.mesh");
+    run(
+        &dir,
+        &ball("r.mesh", &["-q", "-o", "o.mesh", "--report", "j.json"]),
+    )
+    .expect(0, "");
+    let j: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(dir.join("j.json")).unwrap()).unwrap();
+    assert!(j["written"]["delta_t"].as_f64().is_some_and(f64::is_finite));
+    // Beyond 1e±100 the unit sphere is not representable against the rest: exit 2, up front.
+    scaled_cube(&dir, 1e300, "big.mesh");
+    run(&dir, &ball("big.mesh", &["-q", "-o", "b.mesh"])).expect(2, "big.mesh: --target ball");
+    assert!(!dir.join("b.mesh").exists());
+}
+
+#[test]
+fn ball_target_boundary_errors_name_the_rest_file() {
+    let dir = TempDir::new("balltopo");
+    fs::write(
+        dir.join("two.mesh"),
+        "MeshVersionFormatted 1\nDimension 3\nVertices\n8\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n\
+         5 0 0 0\n6 0 0 0\n5 1 0 0\n5 0 1 0\nTetrahedra\n2\n1 2 3 4 0\n5 6 7 8 0\nEnd\n",
+    )
+    .unwrap();
+    let r = run(&dir, &ball("two.mesh", &["-q", "-o", "o.mesh"]));
+    r.expect(
+        2,
+        "foldfree: error: two.mesh: --target ball needs a connected",
+    );
+}
+
+#[test]
+fn render_refuses_non_finite_positions_and_texture_coordinates() {
+    let dir = TempDir::new("render_nan");
+    fs::write(
+        dir.join("p.obj"),
+        "v 0 0 0\nv nan 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n",
+    )
+    .unwrap();
+    run(
+        &dir,
+        &["render", "p.obj", "-o", "p.png", "--shade", "normals"],
+    )
+    .expect(2, "p.obj: vertex 1 has a non-finite coordinate (NaN)");
+    // A glTF TEXCOORD_0 with a NaN (an OBJ `vt nan` is refused by the OBJ reader).
+    let mut bytes = Vec::new();
+    for c in [0f32, 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0.] {
+        bytes.extend(c.to_le_bytes());
+    }
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        bytes.extend(i.to_le_bytes());
+    }
+    for c in [f32::NAN, 0., 1., 0., 1., 1., 0., 1.] {
+        bytes.extend(c.to_le_bytes());
+    }
+    use base64::Engine as _;
+    let b64 = base64::engine::general_purpose::STANDARD.encode(&bytes);
+    let doc = format!(
+        r#"{{"asset":{{"version":"2.0"}},"buffers":[{{"byteLength":{},"uri":"data:application/octet-stream;base64,{b64}"}}],
+        "bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":48}},{{"buffer":0,"byteOffset":48,"byteLength":12}},{{"buffer":0,"byteOffset":60,"byteLength":32}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},{{"bufferView":1,"componentType":5123,"count":6,"type":"SCALAR"}},{{"bufferView":2,"componentType":5126,"count":4,"type":"VEC2"}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0,"TEXCOORD_0":2}},"indices":1}}]}}]}}"#,
+        bytes.len()
+    );
+    fs::write(dir.join("t.gltf"), doc).unwrap();
+    run(&dir, &["render", "t.gltf", "-o", "t.png"])
+        .expect(2, "t.gltf: texture coordinate 0 is not finite");
+    assert!(!dir.join("p.png").exists() && !dir.join("t.png").exists());
+}
+
+#[test]
+fn bench_never_overwrites_an_input_and_a_failed_run_is_not_exit_0() {
+    // `bench a.obj a-mips-cpu.obj` replaced the second input with the first's map, exit 0;
+    // a missing mesh was a table row with exit 0.
+    let dir = scratch("bench", &["camel_open.obj"]);
+    fs::copy(data("camel_open.obj"), dir.join("camel_open-mips-cpu.obj")).unwrap();
+    let args = [
+        "bench",
+        "camel_open.obj",
+        "camel_open-mips-cpu.obj",
+        "--backend",
+        "cpu",
+        "--energy",
+        "mips",
+        "--max-iters",
+        "5",
+        "--out-dir",
+        ".",
+    ];
+    run(&dir, &args).expect(2, "refusing to overwrite the input camel_open-mips-cpu.obj");
+    assert_eq!(
+        fs::read(dir.join("camel_open-mips-cpu.obj")).unwrap(),
+        fs::read(data("camel_open.obj")).unwrap()
+    );
+    run(
+        &dir,
+        &["bench", "nope.obj", "--backend", "cpu", "--out-dir", "o"],
+    )
+    .expect(2, "nope.obj: cannot read");
+    run(
+        &dir,
+        &[
+            "bench",
+            "camel_open.obj",
+            "--backend",
+            "cpu",
+            "--out-dir",
+            "camel_open.obj",
+        ],
+    )
+    .expect(2, "camel_open.obj: cannot write the output folder here");
+    assert_eq!(dir.entries().len(), 2, "nothing written");
+}
+
+#[test]
+fn a_map_that_overflows_the_file_units_is_bad_input_not_a_solver_failure() {
+    // Corners at ±1.7e308: the unit-scale map, scaled back, is not representable (was exit 1
+    // after the solve).
+    let dir = TempDir::new("f64max");
+    fs::write(
+        dir.join("s.obj"),
+        "v -1.7e308 -1.7e308 0\nv 1.7e308 -1.7e308 0\nv 1.7e308 1.7e308 0\nv -1.7e308 1.7e308 0\nf 1 2 3\nf 1 3 4\n",
+    )
+    .unwrap();
+    run(&dir, &["param", "s.obj", "-o", "o.obj", "-q"])
+        .expect(2, "s.obj: the map has the mesh's size");
+    assert!(!dir.join("o.obj").exists());
+    run(&dir, &["stats", "s.obj"]).expect(0, "");
+}
+
+#[test]
+fn a_constraint_target_beyond_1e100_times_the_mesh_is_bad_input() {
+    // Was exit 1 after the work ("Newton start has ... a non-finite value").
+    let dir = scratch("far_target", &["cube_5tets.mesh"]);
+    fs::write(dir.join("c.txt"), "0 0 0 0\n7 1e300 1e300 1e300\n").unwrap();
+    run(
+        &dir,
+        &[
+            "volmap",
+            "cube_5tets.mesh",
+            "--constraints",
+            "c.txt",
+            "-q",
+            "-o",
+            "o.mesh",
+        ],
+    )
+    .expect(2, "c.txt: the target of vertex 7");
+    assert!(!dir.join("o.mesh").exists());
+}

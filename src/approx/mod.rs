@@ -154,17 +154,19 @@ impl ApproxOptions {
     /// seed that 100 others could not beat is not found by the next million).
     pub fn validate(&self) -> Result<(), ApproxError> {
         if self.k == 0 {
-            return Err(ApproxError::BadInput("-k must be at least 1".into()));
+            return Err(ApproxError::BadInput(
+                "option k = 0 is outside its range [1, ∞)".into(),
+            ));
         }
         if !(self.angle_deg.is_finite() && self.angle_deg > 0.0 && self.angle_deg <= 180.0) {
             return Err(ApproxError::BadInput(format!(
-                "--angle {} is outside (0, 180]",
+                "option angle = {} is outside its range (0, 180]",
                 self.angle_deg
             )));
         }
         if self.restarts > 100 {
             return Err(ApproxError::BadInput(format!(
-                "--restarts {} is outside [0, 100]",
+                "option restarts = {} is outside its range [0, 100]",
                 self.restarts
             )));
         }

@@ -28,6 +28,16 @@ pub enum MeshError {
         face: usize,
         vertex: usize,
     },
+    /// A degenerate face of a mesh whose size in the file's units overflows or underflows
+    /// f64 when squared (coordinates near 1e±200 and beyond): the area is given relative to
+    /// the bounding box, where the test is made.
+    #[error("{file}: face {face} is degenerate (area {rel_area:.3e} x bbox diagonal^2, below the tolerance {tolerance:.3e}; in the file's units the area is not representable)")]
+    DegenerateRelative {
+        file: PathBuf,
+        face: usize,
+        rel_area: f64,
+        tolerance: f64,
+    },
     #[error("{file}: face {face} is degenerate (area {area:.3e}, below {threshold:.3e} = tolerance x bbox diagonal^2)")]
     Degenerate {
         file: PathBuf,

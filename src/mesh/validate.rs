@@ -169,11 +169,25 @@ pub fn validate_with_topology(
     for (f, tri) in mesh.faces.iter().enumerate() {
         let area = face_area(tri.map(at));
         if area <= threshold || area.is_nan() {
+            let (a, t) = (
+                sim.length(sim.length(area)),
+                sim.length(sim.length(threshold)),
+            );
+            // "area 0, below inf" says nothing: where the file's units do not square into
+            // f64, say it relative to the box, as the test is made.
+            if !(t.is_finite() && t > 0.0 && a.is_finite()) {
+                return Err(MeshError::DegenerateRelative {
+                    file: file.to_path_buf(),
+                    face: f,
+                    rel_area: area / (diagonal * diagonal),
+                    tolerance: opts.degenerate_rel_tol,
+                });
+            }
             return Err(MeshError::Degenerate {
                 file: file.to_path_buf(),
                 face: f,
-                area: sim.length(sim.length(area)),
-                threshold: sim.length(sim.length(threshold)),
+                area: a,
+                threshold: t,
             });
         }
         min_area = min_area.min(area);

@@ -37,7 +37,11 @@ pub(crate) fn run_atlas(
     let mut extra = Vec::new();
     while extra.len() < job.cut_options.extra_seams {
         match most_shrunk_vertex(&cutm, &job.input)? {
-            Some((v, ratio)) if ratio > job.cut_options.stretch_limit => extra.push(v),
+            // The same vertex again means its seam did not help: stop (a large
+            // `extra_seams` otherwise re-cut the same seam for ever).
+            Some((v, ratio)) if ratio > job.cut_options.stretch_limit && !extra.contains(&v) => {
+                extra.push(v)
+            }
             _ => break,
         }
         cutm = cut::cut_to_disks_through(&input, topo, &job.cut_options, &job.input, &extra)?;

@@ -63,6 +63,34 @@ impl Default for CutOptions {
     }
 }
 
+impl CutOptions {
+    /// Checks every setting against its range (usage errors, exit 2 in the CLI; hosts get the
+    /// same): each extra or splitting seam costs a map of the charts, so their counts are
+    /// capped where more could only turn a long run into a hang; the weights are finite.
+    pub fn validate(&self) -> crate::Result<()> {
+        fn bad(what: &str, value: impl std::fmt::Display, range: &str) -> crate::Result<()> {
+            Err(crate::Error::Usage(format!(
+                "cut option {what} = {value} is outside its range {range}"
+            )))
+        }
+        let w = self.curvature_weight;
+        if !(w.is_finite() && (0.0..=1e6).contains(&w)) {
+            return bad("seam_curvature", w, "[0, 1e6]");
+        }
+        if self.extra_seams > 1000 {
+            return bad("extra_seams", self.extra_seams, "[0, 1000]");
+        }
+        let s = self.stretch_limit;
+        if !(s.is_finite() && s >= 1.0) {
+            return bad("stretch_limit", s, "[1, ∞), finite");
+        }
+        if self.overlap_splits > 1000 {
+            return bad("overlap_splits", self.overlap_splits, "[0, 1000]");
+        }
+        Ok(())
+    }
+}
+
 /// A mesh cut open along seams into disk charts.
 #[derive(Clone, Debug)]
 pub struct CutMesh {

@@ -131,6 +131,8 @@ fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
 pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Result<ParamOutput> {
     let t0 = Instant::now();
     job.admm.validate()?;
+    job.cut_options.validate()?;
+    job.pack.validate()?;
     let mut outputs = Outputs::new();
     outputs.input(&job.input);
     outputs.output(&job.output, "map", &["obj", "glb", "gltf"])?;
@@ -166,6 +168,18 @@ pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Resu
     if out.report.atlas.is_none() {
         for t in &mut out.uv {
             *t = [scale.length(t[0]), scale.length(t[1])];
+        }
+        // Coordinates near f64's limit (1.8e308) give a map at their scale that does not fit
+        // in it: the input's units are the problem (exit 2, before anything is written), not
+        // a solver failure.
+        if out.uv.iter().flatten().any(|c| !c.is_finite()) {
+            return Err(Error::Usage(format!(
+                "{}: the map has the mesh's size, and in this file's units (coordinates up to \
+                 {:.1e}) it overflows f64; scale the mesh down, or use --cut always (an atlas \
+                 is packed into [0, 1]²)",
+                job.input.display(),
+                scale.factor
+            )));
         }
     }
     for p in &mut out.mesh.positions {

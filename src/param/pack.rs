@@ -55,30 +55,28 @@ impl PackOptions {
     /// Checks the ranges (`resolution` 16..=16384, `padding` below a quarter of it, `max_pages`
     /// 1..=1000).
     pub fn validate(&self) -> crate::Result<()> {
+        fn bad(what: &str, value: impl std::fmt::Display, range: &str) -> crate::Result<()> {
+            Err(crate::Error::Usage(format!(
+                "pack option {what} = {value} is outside its range {range}"
+            )))
+        }
         if !(1..=1000).contains(&self.max_pages) {
-            return Err(crate::Error::Usage(format!(
-                "--max-pages {} is outside 1..=1000",
-                self.max_pages
-            )));
+            return bad("max_pages", self.max_pages, "[1, 1000]");
         }
         if !(16..=16384).contains(&self.resolution) {
-            return Err(crate::Error::Usage(format!(
-                "--resolution {} is outside 16..=16384",
-                self.resolution
-            )));
+            return bad("resolution", self.resolution, "[16, 16384]");
         }
         if let Some(d) = self.texels_per_unit {
             if !(d.is_finite() && d > 0.0) {
-                return Err(crate::Error::Usage(format!(
-                    "--texel-density {d} must be a positive number"
-                )));
+                return bad("texel_density", d, "(0, ∞), finite");
             }
         }
         if self.padding >= self.resolution / 4 {
-            return Err(crate::Error::Usage(format!(
-                "--padding {} must be below a quarter of the resolution ({})",
-                self.padding, self.resolution
-            )));
+            return bad(
+                "padding",
+                self.padding,
+                &format!("[0, {}) (a quarter of the resolution)", self.resolution / 4),
+            );
         }
         Ok(())
     }
@@ -324,6 +322,18 @@ fn search_resolution(
             },
         )
     };
+    // Below one texel for the largest chart, the texel offsets swamp the chart's coordinates
+    // in f64 and its faces collapse: a density that small is a usage error, not a failed run.
+    let largest = shapes
+        .iter()
+        .flat_map(|o| o.iter().map(|p| span(p)))
+        .fold(0.0f64, f64::max);
+    if largest * density < 1.0 || (largest * density).is_nan() {
+        return Err(crate::Error::Usage(format!(
+            "--texel-density {density:e}: the largest chart ({largest:.3e} units across) would \
+             be under one texel; raise --texel-density"
+        )));
+    }
     let round4 = |x: f64| ((x / 4.0).ceil() as u32).saturating_mul(4);
     let pages = f64::from(opts.max_pages.max(1));
     let mut lo = round4((total_area.sqrt() * density / pages.sqrt()).max(16.0)).min(MAX);
@@ -342,7 +352,7 @@ fn search_resolution(
     }
     let Some(mut a_ok) = found else {
         return Err(crate::Error::Usage(format!(
-            "at {density} texels per unit the charts need more than {MAX}² texels; lower \
+            "at {density:e} texels per unit the charts need more than {MAX}² texels; lower \
              --texel-density"
         )));
     };
@@ -369,6 +379,12 @@ struct Attempt {
 }
 
 /// Places every chart at `scale` texels per unit, or `None` when one does not fit.
+/// The larger side of the bounding box of a chart footprint.
+fn span(pts: &[[f64; 2]]) -> f64 {
+    let (lo, hi) = bounds(pts);
+    (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.0)
+}
+
 fn attempt(
     shapes: &[Vec<Vec<[f64; 2]>>],
     tris: &[Vec<[usize; 3]>],
@@ -377,6 +393,15 @@ fn attempt(
 ) -> Option<Attempt> {
     let n = opts.resolution as usize;
     let pad = opts.padding as usize;
+    // A chart wider than the texture cannot fit: refuse it before rasterizing, whose bitmap
+    // would be as large as the scaled chart (a density of 1e300 asked for an impossible
+    // allocation and panicked).
+    if shapes.iter().any(|o| {
+        let side = o.iter().map(|p| span(p)).fold(0.0, f64::max) * scale;
+        side > n as f64 || side.is_nan()
+    }) {
+        return None;
+    }
     // Footprints of each orientation.
     let masks: Vec<Vec<Mask>> = shapes
         .iter()

@@ -36,11 +36,14 @@ impl UvObj {
         }
         let side = (hi[0] - lo[0]).max(hi[1] - lo[1]);
         let scale = if side > 0.0 { 1.0 / side } else { 1.0 };
+        // Positions at unit scale before they become f32 (whose range ends at 3.4e38): the
+        // camera frames the bounding box, so the picture is the same at any scale.
+        let unit = crate::mesh::Scale::fit(&self.positions);
         let mut positions = Vec::with_capacity(n);
         let mut uvs = Vec::with_capacity(n);
         for (f, t) in self.faces.iter().zip(&self.face_uvs) {
             for k in 0..3 {
-                let p = self.positions[f[k]];
+                let p = unit.apply(self.positions[f[k]]);
                 let uv = self.uvs[t[k]];
                 positions.push([p[0] as f32, p[1] as f32, p[2] as f32]);
                 uvs.push([
@@ -200,7 +203,38 @@ pub fn read_gltf_with_uv(path: &Path, max_faces: usize, set: Option<u32>) -> Res
         obj.face_uvs
             .extend(p.triangles.iter().map(|t| t.map(|v| base + v as usize)));
     }
-    Ok(obj)
+    obj.check_finite(path)
+}
+
+impl UvObj {
+    /// A NaN or infinite position or UV would be drawn as nothing or as garbage and the
+    /// picture still written: refused, naming the file and the vertex or UV.
+    pub fn check_finite(self, path: &Path) -> Result<UvObj> {
+        if let Some(v) = self
+            .positions
+            .iter()
+            .position(|p| !p.iter().all(|c| c.is_finite()))
+        {
+            let value = self.positions[v].into_iter().find(|c| !c.is_finite());
+            return Err(Error::Mesh(crate::mesh::MeshError::NonFinite {
+                file: path.to_path_buf(),
+                vertex: v,
+                value: value.unwrap_or(f64::NAN),
+            }));
+        }
+        if let Some(t) = self
+            .uvs
+            .iter()
+            .position(|p| !p.iter().all(|c| c.is_finite()))
+        {
+            return Err(Error::Usage(format!(
+                "{}: texture coordinate {t} is not finite ({:?})",
+                path.display(),
+                self.uvs[t]
+            )));
+        }
+        Ok(self)
+    }
 }
 
 /// Reads `path` with [`parse_obj_with_uv`].
@@ -223,7 +257,7 @@ pub fn read_obj_with_uv(path: &Path, max_faces: usize) -> Result<UvObj> {
             reason: "not UTF-8 text (binary file?)".into(),
         })
     })?;
-    parse_obj_with_uv(&text, &path.display().to_string())
+    parse_obj_with_uv(&text, &path.display().to_string())?.check_finite(path)
 }
 
 /// Encodes `width × height` RGBA8 pixels (rows top to bottom) as PNG.

@@ -42,8 +42,8 @@ pub fn sphere_embedding(
         positions: lp.clone(),
         faces: lf.clone(),
     };
-    let topo = Topology::build(&surf, Path::new("<boundary surface>"))
-        .map_err(|e| VolError::Input(format!("boundary surface: {e}")))?;
+    let topo = Topology::build(&surf, Path::new("boundary surface"))
+        .map_err(|e| VolError::Input(e.to_string()))?;
     if topo.components != 1 || !topo.boundary_loops.is_empty() || topo.genus() != Some(0) {
         return Err(VolError::Input(format!(
             "--target ball needs a connected genus-0 boundary surface; this one is {}",
@@ -59,8 +59,8 @@ pub fn sphere_embedding(
         positions: lp.clone(),
         faces: disk.clone(),
     };
-    let dtopo = Topology::build(&dmesh, Path::new("<boundary surface minus a star>"))
-        .map_err(|e| VolError::Input(format!("boundary surface: {e}")))?;
+    let dtopo = Topology::build(&dmesh, Path::new("boundary surface minus a star"))
+        .map_err(|e| VolError::Input(e.to_string()))?;
     let Some(lp_loop) = dtopo.boundary_loops.first() else {
         return Err(VolError::Input(
             "boundary surface: no disk after removing a star".into(),

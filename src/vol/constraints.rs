@@ -76,6 +76,23 @@ pub fn constraints_text(c: &[(u32, [f64; 3])], header: &str) -> String {
     s
 }
 
+/// Checks the settings of [`twist_constraints`] (usage errors, exit 2): a finite angle, and
+/// a held fraction in [0, 0.5) so the two ends do not overlap.
+pub fn check_twist(degrees: f64, fraction: f64) -> Result<(), VolError> {
+    let bad = |what: &str, value: f64, range: &str| {
+        Err(VolError::Input(format!(
+            "volmap-constraints option {what} = {value} is outside its range {range}"
+        )))
+    };
+    if !degrees.is_finite() {
+        return bad("twist", degrees, "(-∞, ∞), finite");
+    }
+    if !(0.0..0.5).contains(&fraction) {
+        return bad("fraction", fraction, "[0, 0.5)");
+    }
+    Ok(())
+}
+
 /// A twist of part of the boundary: along the longest bounding-box axis, boundary vertices in
 /// the first `fraction` of the length stay where they are, those in the last `fraction` are
 /// rotated by `degrees` about the axis through the bounding-box centre, the rest are free.

@@ -37,14 +37,14 @@ pub enum VolError {
         vertex: usize,
     },
     /// A rest tet has negative volume (the rest shape must be a valid embedding).
-    #[error("{}: rest tet {tet} is inverted (signed volume {volume:.3e})", file.display())]
+    #[error("{}: rest tet {tet} is inverted (signed volume {volume:.3e} at unit scale)", file.display())]
     InvertedRest {
         file: PathBuf,
         tet: usize,
         volume: f64,
     },
     /// A rest tet has (numerically) zero volume: its Jacobian is undefined.
-    #[error("{}: rest tet {tet} has zero volume ({volume:.3e})", file.display())]
+    #[error("{}: rest tet {tet} has zero volume ({volume:.3e} at unit scale)", file.display())]
     ZeroVolume {
         file: PathBuf,
         tet: usize,

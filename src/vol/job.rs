@@ -125,6 +125,24 @@ pub fn constraints_for(
     }
 }
 
+/// `--target ball` maps the rest onto the unit sphere of its own coordinates, so the rest's
+/// size is part of the problem: beyond 1e±100 the map's Jacobians (≈ 1/size) make the
+/// distortion ‖J‖² + ‖J⁻¹‖² overflow f64 (1e±300 squared), and no solve can succeed. That is
+/// the input's units, refused up front, not a solver failure after the work.
+fn ball_scale_in_range(rest: &TetMesh, path: &Path) -> Result<(), VolError> {
+    let f = Scale::fit(&rest.positions).factor;
+    // 2^±340 ≈ 2e±102: every mesh between 1e-100 and 1e100 across passes (the factor is the
+    // power of two at or above its largest coordinate).
+    if !(2f64.powi(-340)..=2f64.powi(340)).contains(&f) {
+        return Err(VolError::Input(format!(
+            "{}: --target ball maps onto the unit sphere, but the mesh is about {f:.0e} across: \
+             the map's distortion would overflow; scale the mesh to between 1e-100 and 1e100",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Runs a job end to end and returns the report. Every output (the map, its TetGen pair, the
 /// report, the constraints met) is checked before the work and committed together after the
 /// written map was re-read and checked; on any error nothing is written.
@@ -159,6 +177,15 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         ConstraintSource::Ball => Scale::default(),
         _ => Scale::fit(&rest_file.positions),
     };
+    if job.constraints == ConstraintSource::Ball {
+        ball_scale_in_range(&rest_file, &job.rest)?;
+    }
+    // Problems of the input found while solving (a boundary surface that is not a sphere, a
+    // degenerate tet) name the rest file, as the reader's errors do.
+    let locate = |e: VolError| match e {
+        VolError::Input(msg) => VolError::Input(format!("{}: {msg}", job.rest.display())),
+        e => e,
+    };
     let scaled = |p: &[[f64; 3]]| -> Vec<[f64; 3]> { p.iter().map(|&q| scale.apply(q)).collect() };
     let rest = TetMesh {
         positions: scaled(&rest_file.positions),
@@ -169,7 +196,8 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     let mut sliding = None;
     let (init, targets) = match &job.constraints {
         ConstraintSource::Ball => {
-            let (start, t, bad) = ball_target(&rest, job.options.sphere_relax.as_ref())?;
+            let (start, t, bad) =
+                ball_target(&rest, job.options.sphere_relax.as_ref()).map_err(locate)?;
             sphere_bad = Some(bad);
             let start = init_pos.unwrap_or(start);
             match &job.options.untangle {
@@ -181,7 +209,8 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
                         u,
                         job.options.ball_relax.as_ref(),
                         ctx.as_ref(),
-                    )?;
+                    )
+                    .map_err(locate)?;
                     let ok = s.inverted_left == 0;
                     sliding = Some(s);
                     if ok {
@@ -195,9 +224,22 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         }
         src => {
             let mut t = constraints_for(&rest, init_pos.as_deref(), src)?;
-            if matches!(src, ConstraintSource::File(_)) {
+            if let ConstraintSource::File(path) = src {
                 for (_, p) in &mut t {
                     *p = scale.apply(*p);
+                }
+                // At unit scale a target 1e100 away has a squared distance of 1e200, and the
+                // penalty energy multiplies that again: further out it overflows and no
+                // fold-free map can be found (was exit 1 after the work). The file's fault.
+                if let Some((v, p)) = t.iter().find(|(_, p)| p.iter().any(|c| c.abs() > 1e100)) {
+                    return Err(VolError::Input(format!(
+                        "{}: the target of vertex {v} ({:e}, {:e}, {:e}) is more than 1e100 \
+                         times the rest mesh's size away; its squared distance overflows f64",
+                        path.display(),
+                        scale.invert(*p)[0],
+                        scale.invert(*p)[1],
+                        scale.invert(*p)[2]
+                    )));
                 }
             }
             let init = match init_pos {
@@ -234,7 +276,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         },
     );
     bar.finish_and_clear();
-    let (x, mut run) = out?;
+    let (x, mut run) = out.map_err(locate)?;
     if let Some(ctx) = &ctx {
         ctx.check_validation_messages()?;
     }

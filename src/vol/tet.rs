@@ -112,10 +112,15 @@ impl TetMesh {
     /// defined relative to it, so one bad tet poisons the whole problem. Flat means volume
     /// ≤ 1e-15·diag³ (far below any real mesh's smallest tet, far above round-off).
     pub fn check_rest(&self, file: &Path) -> Result<(), VolError> {
-        let d = self.bbox_diagonal();
+        // At unit scale (a power of two: exact), so a mesh at 1e308 has no volume that
+        // overflows and one at 1e-300 none that underflows; the reported volume is at that
+        // scale too.
+        let scale = crate::mesh::Scale::fit(&self.positions);
+        let p: Vec<[f64; 3]> = self.positions.iter().map(|&q| scale.apply(q)).collect();
+        let d = bbox_diagonal(&p);
         let eps = 1e-15 * d * d * d;
         for (t, tet) in self.tets.iter().enumerate() {
-            let v = det6(&self.positions, tet) / 6.0;
+            let v = det6(&p, tet) / 6.0;
             if !v.is_finite() || v.abs() <= eps {
                 return Err(VolError::ZeroVolume {
                     file: file.to_path_buf(),

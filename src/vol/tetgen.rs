@@ -207,6 +207,11 @@ pub fn parse_node(text: &str, file: &Path) -> Result<NodeFile, VolError> {
                 vertex: i,
             });
         }
+        // Attributes are not used, but a field that is not a number means the record is not
+        // what the header says it is.
+        for k in 0..nattr {
+            num::<f64>(t.get(4 + k), file, l, "a point attribute")?;
+        }
         let r = if nmark > 0 {
             num(t.get(4 + nattr), file, l, "a boundary marker")?
         } else {
@@ -420,6 +425,10 @@ pub fn tet_input(outputs: &mut Outputs, path: &Path) {
 
 /// Plans a tet mesh output (both files of a TetGen pair) in a run's outputs.
 pub fn tet_output(outputs: &mut Outputs, path: &Path, what: &str) -> Result<(), VolError> {
+    // An unknown extension is an output path problem: the policy's message, not the reader's.
+    if format_of(path).is_err() {
+        outputs.output(path, what, &["mesh", "node", "ele"])?;
+    }
     for f in files_of(path)? {
         outputs.output(&f, what, &["mesh", "node", "ele"])?;
     }

@@ -281,7 +281,22 @@ pub fn tet_distortions(mesh: &TetMesh, x: &[[f64; 3]]) -> Vec<f64> {
 
 /// Measures a map of `mesh` against constraints (independent of the solver's state).
 pub fn evaluate(mesh: &TetMesh, x: &[[f64; 3]], targets: &[(u32, [f64; 3])]) -> MapQuality {
-    let d = tet_distortions(mesh, x);
+    // Measured at the rest's unit scale (rest and map divided by one power of two: J, δ and
+    // the volume weights' ratios are exact), so a rest at 1e100 mapped onto the unit sphere
+    // does not overflow its volume-weighted sums; inversion is a sign, judged on the map at
+    // its own unit scale.
+    let rest_scale = crate::mesh::Scale::fit(&mesh.positions);
+    let at = |s: crate::mesh::Scale, p: &[[f64; 3]]| -> Vec<[f64; 3]> {
+        p.iter().map(|&q| s.apply(q)).collect()
+    };
+    let unit = TetMesh {
+        positions: at(rest_scale, &mesh.positions),
+        ..mesh.clone()
+    };
+    let xr = at(rest_scale, x);
+    let xu = at(crate::mesh::Scale::fit(x), x);
+    let mesh = &unit;
+    let d = tet_distortions(mesh, &xr);
     let mut pinned = vec![false; x.len()];
     for (v, _) in targets {
         pinned[*v as usize] = true;
@@ -302,7 +317,7 @@ pub fn evaluate(mesh: &TetMesh, x: &[[f64; 3]], targets: &[(u32, [f64; 3])]) -> 
     }
     MapQuality {
         tets: mesh.tets.len(),
-        inverted: mesh.inverted(x).len(),
+        inverted: mesh.inverted(&xu).len(),
         delta_t: s / sw,
         delta_t_free: if swf > 0.0 { sf / swf } else { f64::NAN },
         pinned_tets,
