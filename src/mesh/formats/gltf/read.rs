@@ -586,8 +586,11 @@ fn build_mesh(
     Ok((mesh, prims))
 }
 
-/// Every attribute and morph-target accessor of primitive `p` (at JSON `path`) is in bounds
-/// and has the POSITION count `n`; returns the `n` of its `TEXCOORD_n` sets, ascending.
+/// Every attribute and morph-target accessor of primitive `p` (at JSON `path`) is in bounds,
+/// has the POSITION count `n` and, when it holds floats, only finite ones (glTF forbids NaN
+/// and infinities in accessor data, and attributes foldfree does not use are written back as
+/// they were read: a non-finite one would be passed on); returns the `n` of its `TEXCOORD_n`
+/// sets, ascending.
 fn check_vertex_accessors(
     p: &gltf::Primitive<'_>,
     buffers: &[Vec<u8>],
@@ -603,6 +606,20 @@ fn check_vertex_accessors(
                 &at,
                 format!("{} elements, but POSITION has {n}", el.count),
             ));
+        }
+        if el.float {
+            if let Some(i) =
+                (0..el.count).find(|&i| el.components(i)[..el.dims].iter().any(|x| !x.is_finite()))
+            {
+                return Err(located(
+                    file,
+                    &at,
+                    format!(
+                        "element {i} is not a finite number ({:?})",
+                        &el.components(i)[..el.dims]
+                    ),
+                ));
+            }
         }
         Ok(())
     };
