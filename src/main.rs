@@ -37,7 +37,7 @@ enum Command {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
-        /// Refuse meshes with more faces (and files larger than such a mesh's text).
+        /// Refuse meshes with more faces (and files larger than such a mesh's text); 0 = no limit.
         #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS, value_parser = clap::value_parser!(usize))]
         max_faces: usize,
     },
@@ -147,7 +147,7 @@ struct VolmapArgs {
     /// sliding on the sphere) and run the paper's guided deformation + penalty rounds only.
     #[arg(long)]
     no_untangle: bool,
-    /// Refuse meshes with more tets (and files larger than such a mesh's text).
+    /// Refuse meshes with more tets (and files larger than such a mesh's text); 0 = no limit.
     #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
     max_tets: usize,
     /// No progress display.
@@ -168,7 +168,7 @@ struct VolConstraintArgs {
     /// Fraction of the length held at each end (near end fixed, far end twisted).
     #[arg(long, default_value_t = 0.15)]
     fraction: f64,
-    /// Refuse meshes with more tets (and files larger than such a mesh's text).
+    /// Refuse meshes with more tets (and files larger than such a mesh's text); 0 = no limit.
     #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
     max_tets: usize,
 }
@@ -190,7 +190,7 @@ struct VolcheckArgs {
     /// maps; exit 1 above 1e-9).
     #[arg(long)]
     sphere: bool,
-    /// Refuse meshes with more tets (and files larger than such a mesh's text).
+    /// Refuse meshes with more tets (and files larger than such a mesh's text); 0 = no limit.
     #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
     max_tets: usize,
 }
@@ -253,7 +253,7 @@ fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         report: a.report,
         write_constraints: a.write_constraints,
         quiet: a.quiet,
-        max_tets: a.max_tets,
+        max_tets: element_limit(a.max_tets),
         options,
         backend: backend_of(a.backend),
         device: a.device,
@@ -317,7 +317,7 @@ fn run_volmap_constraints(a: VolConstraintArgs) -> foldfree::Result<()> {
     foldfree::vol::tetgen::tet_input(&mut outputs, &a.rest);
     outputs.output(&a.output, "constraints", &[])?;
     foldfree::vol::constraints::check_twist(a.twist, a.fraction)?;
-    let rest = foldfree::vol::job::read_rest(&a.rest, a.max_tets)?;
+    let rest = foldfree::vol::job::read_rest(&a.rest, element_limit(a.max_tets))?;
     let c = twist_constraints(&rest, a.twist, a.fraction);
     let header = format!(
         "foldfree volmap-constraints {} --twist {} --fraction {}\nvertex_index x y z (0-based)",
@@ -337,7 +337,7 @@ fn run_volmap_constraints(a: VolConstraintArgs) -> foldfree::Result<()> {
 
 fn run_volcheck(a: VolcheckArgs) -> foldfree::Result<()> {
     use foldfree::vol::job::{constraints_for, read_map, read_rest, ConstraintSource};
-    let rest = read_rest(&a.rest, a.max_tets)?;
+    let rest = read_rest(&a.rest, element_limit(a.max_tets))?;
     let x = read_map(&rest, &a.rest, &a.map)?;
     let targets = match (&a.init, &a.constraints) {
         (Some(p), _) => {
@@ -613,7 +613,7 @@ struct ApproxArgs {
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
-    /// Refuse meshes with more faces (and files larger than such a mesh's text).
+    /// Refuse meshes with more faces (and files larger than such a mesh's text); 0 = no limit.
     #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
     max_faces: usize,
     /// No progress display.
@@ -638,7 +638,7 @@ fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     opts.angle_deg = args.angle;
     opts.validate()?;
     let validate = mesh::ValidateOptions {
-        max_faces: Some(args.max_faces),
+        max_faces: Some(element_limit(args.max_faces)),
         ..Default::default()
     };
     let (m, topo, _) = mesh::load(&args.input, &validate)?;
@@ -738,7 +738,8 @@ struct RenderArgs {
     /// uniform patches; or a tet mesh's boundary surface, `.mesh` / `.node`).
     #[arg(long, value_enum, default_value = "checker")]
     shade: ShadeArg,
-    /// Refuse meshes with more faces or tets (and files larger than such a mesh's text).
+    /// Refuse meshes with more faces or tets (and files larger than such a mesh's text); 0 = no
+    /// limit.
     #[arg(long, default_value_t = DEFAULT_MAX_ELEMENTS)]
     max_elements: usize,
 }
@@ -803,11 +804,12 @@ fn run_render(args: RenderArgs) -> foldfree::Result<()> {
     let mut outputs = Outputs::new();
     foldfree::vol::tetgen::tet_input(&mut outputs, &args.input);
     outputs.output(&args.output, "picture", &["png"])?;
+    let max_elements = element_limit(args.max_elements);
     let (positions, uvs, indices) = match args.shade {
-        ShadeArg::Checker => read_with_uv(&args.input, args.max_elements, args.uv_set)?.corners(),
-        ShadeArg::Normals => surface_corners(&args.input, args.max_elements)?,
+        ShadeArg::Checker => read_with_uv(&args.input, max_elements, args.uv_set)?.corners(),
+        ShadeArg::Normals => surface_corners(&args.input, max_elements)?,
     };
-    if indices.len() / 3 > args.max_elements {
+    if indices.len() / 3 > max_elements {
         return Err(foldfree::Error::Usage(format!(
             "{}: {} triangles, more than --max-elements {}",
             args.input.display(),
@@ -872,9 +874,18 @@ fn run_render(args: RenderArgs) -> foldfree::Result<()> {
     Ok(())
 }
 
+/// `--max-faces` / `--max-tets`: 0 means no limit, for every command alike.
+fn element_limit(n: usize) -> usize {
+    if n == 0 {
+        usize::MAX
+    } else {
+        n
+    }
+}
+
 fn run_stats(input: PathBuf, json: bool, max_faces: usize) -> foldfree::Result<()> {
     let opts = mesh::ValidateOptions {
-        max_faces: Some(max_faces),
+        max_faces: Some(element_limit(max_faces)),
         ..Default::default()
     };
     let (m, topo, report) = mesh::load(&input, &opts)?;
@@ -1132,7 +1143,7 @@ fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     job.profile = args.profile;
     job.admm = admm;
     job.energy = energy;
-    job.validate.max_faces = (args.max_faces > 0).then_some(args.max_faces);
+    job.validate.max_faces = Some(element_limit(args.max_faces));
     job.cut = match args.cut {
         CutArg::Auto => param::CutMode::Auto,
         CutArg::None => param::CutMode::Never,

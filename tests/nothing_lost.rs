@@ -1119,3 +1119,15 @@ fn a_constraint_target_beyond_1e100_times_the_mesh_is_bad_input() {
     .expect(2, "c.txt: the target of vertex 7");
     assert!(!dir.join("o.mesh").exists());
 }
+
+/// `--max-faces 0` / `--max-tets 0` mean "no limit" for every command (param already read it
+/// so; stats, approx and the tet commands refused every mesh).
+#[test]
+fn a_size_limit_of_zero_means_no_limit_for_every_command() {
+    let dir = scratch("limit_zero", &["two_triangles.obj", "cube_5tets.mesh"]);
+    run(&dir, &["stats", "two_triangles.obj", "--max-faces", "0"]).expect(0, "");
+    run(&dir, &["stats", "two_triangles.obj", "--max-faces", "1"]).expect(2, "limit of 1");
+    let tets = ["volcheck", "--rest", "cube_5tets.mesh", "cube_5tets.mesh"];
+    run(&dir, &[&tets[..], &["--max-tets", "0"]].concat()).expect(0, "");
+    run(&dir, &[&tets[..], &["--max-tets", "1"]].concat()).expect(2, "limit of 1");
+}
