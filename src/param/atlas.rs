@@ -317,19 +317,7 @@ fn pieces_of(
                     uv[v as usize] = p;
                 }
             }
-            let record = MapOutput {
-                uv,
-                init_flips: 0,
-                admm: None,
-                global: None,
-                start_proxy_iterations: 0,
-                path: SolverPath::None,
-                kernel_times: None,
-                bytes_per_iteration: None,
-                seconds_init: 0.0,
-                seconds_solve: 0.0,
-            };
-            (c.clone(), record)
+            (c.clone(), MapOutput::unsolved(uv, 0, 0.0))
         })
         .collect();
     if let Some(largest) = out.iter_mut().max_by_key(|(c, _)| c.len()) {

@@ -140,6 +140,22 @@ pub struct MapOutput {
 }
 
 impl MapOutput {
+    /// `uv` as it is, with no solver run on it (path `none`).
+    pub fn unsolved(uv: Vec<[f64; 2]>, init_flips: usize, seconds_init: f64) -> MapOutput {
+        MapOutput {
+            uv,
+            init_flips,
+            admm: None,
+            global: None,
+            start_proxy_iterations: 0,
+            path: SolverPath::None,
+            kernel_times: None,
+            bytes_per_iteration: None,
+            seconds_init,
+            seconds_solve: 0.0,
+        }
+    }
+
     /// Whether the last solver that ran met its stop test (true when no solver ran): the
     /// global solver's when it ran (alone or after the hand-off), else ADMM's.
     pub fn converged(&self) -> bool {
@@ -216,18 +232,7 @@ pub fn compute_map(
     let seconds_init = t1.elapsed().as_secs_f64();
 
     let t2 = Instant::now();
-    let mut out = MapOutput {
-        uv: Vec::new(),
-        init_flips,
-        admm: None,
-        global: None,
-        start_proxy_iterations: 0,
-        path: SolverPath::None,
-        kernel_times: None,
-        bytes_per_iteration: None,
-        seconds_init,
-        seconds_solve: 0.0,
-    };
+    let mut out = MapOutput::unsolved(Vec::new(), init_flips, seconds_init);
     let global_opts = GlobalOptions {
         stop: opts.stop.clone(),
         ..GlobalOptions::for_energy(opts.energy)
