@@ -589,3 +589,38 @@ fn sphere_relaxation_spreads_a_crowded_embedding() {
         spread(&after)
     );
 }
+
+/// Protected tets keep the ε → 0 limit energy, a barrier: the untangler repairs the inverted
+/// tet by moving the free vertex and never accepts a step that inverts a protected one; a tet
+/// inverted at the start is not protected (its limit energy is infinite there).
+#[test]
+fn untangle_protected_keeps_protected_tets_positive() {
+    use foldfree::vol::newton::corners_of;
+    use foldfree::vol::untangle::untangle_protected;
+    let m = star_tet();
+    let mut x = m.positions.clone();
+    x[4] = [0.5, 0.5, 0.5];
+    assert_eq!(m.inverted(&x), vec![0]);
+    let (d, vol): (Vec<_>, Vec<_>) = m
+        .tets
+        .iter()
+        .map(|t| corners_of(t.map(|v| m.positions[v as usize])).unwrap())
+        .map(|(c, det)| (c, det.abs()))
+        .unzip();
+    let fixed = [true, true, true, true, false];
+    let s = untangle_protected(
+        &m.tets,
+        d,
+        vol,
+        &mut x,
+        &fixed,
+        &[],
+        &[true; 4],
+        &UntangleOptions::default(),
+        None,
+    )
+    .unwrap();
+    assert_eq!(s.inverted, 0);
+    assert!(m.inverted(&x).is_empty());
+    assert_eq!(x[0], [0.0, 0.0, 0.0]);
+}

@@ -109,6 +109,21 @@ pub fn sphere_embedding(
     let (p0, p1) = (lift(s, false), lift(s, true));
     let (b0, b1) = (bad(&p0), bad(&p1));
     let (mut pos, mut nbad) = if b0 <= b1 { (p0, b0) } else { (p1, b1) };
+    if trace() {
+        // Smallest chordal area of a face against its share of the sphere (4π · rest area /
+        // total): how far the conformal start crowds a protrusion.
+        let area = |p: &[[f64; 3]], f: &[u32; 3]| {
+            let [a, b, c] = f.map(|v| p[v as usize]);
+            let nrm = cross(sub(b, a), sub(c, a));
+            0.5 * dot(nrm, nrm).sqrt()
+        };
+        let total: f64 = lf.iter().map(|f| area(&lp, f)).sum();
+        let crowd = lf
+            .iter()
+            .map(|f| area(&pos, f) * total / (4.0 * std::f64::consts::PI * area(&lp, f)))
+            .fold(f64::INFINITY, f64::min);
+        eprintln!("sphere embedding: {nbad} non-positive faces, smallest area / share {crowd:.3e}");
+    }
     if let Some(nopts) = relax {
         // Tets whose four corners are all on the boundary are placed by the surface
         // embedding alone: they belong to the surface problem.
@@ -239,15 +254,48 @@ pub fn relax_on_sphere(
                 None,
             )?;
             if s.inverted > 0 || !obj.value(&y).is_finite() {
+                if trace() {
+                    eprintln!("sphere relax: the stage of {cells} cells was not untangled");
+                    trace_surface_tets(faces, &tets[cones..cells.max(cones)], &y);
+                }
                 break;
             }
         }
         let pattern = Pattern::new(n + 1, &obj.tets);
         iterations += newton(&obj, &pattern, &mut y, opts, &mut |_, _| {})?.iterations;
         x = y;
+        if trace() {
+            trace_surface_tets(faces, &tets[cones..], &x);
+        }
     }
     pos.copy_from_slice(&x[..n]);
     Ok(iterations)
+}
+
+fn trace() -> bool {
+    std::env::var_os("FOLDFREE_VOL_TRACE").is_some()
+}
+
+/// Trace (`FOLDFREE_VOL_TRACE`): the tets with four boundary corners by their number of
+/// boundary faces (0–4), and how many of each are inverted at `x`.
+fn trace_surface_tets(faces: &[[u32; 3]], tets: &[[u32; 4]], x: &[[f64; 3]]) {
+    let key = |mut f: [u32; 3]| {
+        f.sort_unstable();
+        f
+    };
+    let bset: std::collections::HashSet<[u32; 3]> = faces.iter().map(|f| key(*f)).collect();
+    let (mut total, mut inverted) = ([0usize; 5], [0usize; 5]);
+    for t in tets {
+        let nb = [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]
+            .iter()
+            .filter(|c| bset.contains(&key(c.map(|i| t[i]))))
+            .count();
+        total[nb] += 1;
+        if !is_positive(super::tet::det6(x, t)) {
+            inverted[nb] += 1;
+        }
+    }
+    eprintln!("sphere relax: surface tets by boundary faces {total:?}, inverted {inverted:?}");
 }
 
 /// Start map and constraints of the ball target: sphere boundary, harmonic interior.
@@ -311,6 +359,19 @@ pub fn slide_on_sphere(
     let fixed = vec![false; x.len()];
     let inverted_start = mesh.inverted(&x).len();
     let s = untangle_sliding(mesh, &mut x, &fixed, &on_sphere, opts, device)?;
+    if trace() && s.inverted > 0 {
+        let mut by = [0usize; 5];
+        for t in mesh.inverted(&x) {
+            by[mesh.tets[t]
+                .iter()
+                .filter(|&&v| on_sphere[v as usize])
+                .count()] += 1;
+        }
+        eprintln!(
+            "ball: the sliding untangler left {} inverted tet(s); by boundary corners {by:?}",
+            s.inverted
+        );
+    }
     let mut report = SlideReport {
         inverted_start,
         inverted_left: s.inverted,

@@ -156,6 +156,9 @@ struct Problem<'a> {
     w: Vec<f64>,
     fixed: &'a [bool],
     theta: f64,
+    /// Tets measured with the ε → 0 limit of the energy (empty: none): a barrier, +∞ at
+    /// det J ≤ 0, so an accepted step never inverts them (see [`untangle_protected`]).
+    protect: &'a [bool],
     /// Incident slots 4·t + c of each vertex: `inc[start[v]..start[v + 1]]`.
     start: Vec<u32>,
     inc: Vec<u32>,
@@ -176,6 +179,7 @@ impl<'a> Problem<'a> {
         w: Vec<f64>,
         fixed: &'a [bool],
         theta: f64,
+        protect: &'a [bool],
     ) -> Self {
         let (start, inc) = crate::mesh::topology::corner_incidence(fixed.len(), tets);
         Problem {
@@ -184,6 +188,7 @@ impl<'a> Problem<'a> {
             w,
             fixed,
             theta,
+            protect,
             start,
             inc,
         }
@@ -227,9 +232,20 @@ impl<'a> Problem<'a> {
                 .zip(sc.g.par_iter_mut())
                 .enumerate()
                 .for_each(|(t, (fo, go))| {
-                    (*fo, *go) =
-                        tet_terms(x, &self.tets[t], &self.d[t], self.w[t], eps, self.theta);
+                    let e = if self.protect.get(t) == Some(&true) {
+                        0.0
+                    } else {
+                        eps
+                    };
+                    (*fo, *go) = tet_terms(x, &self.tets[t], &self.d[t], self.w[t], e, self.theta);
                 });
+        }
+        if sc.device.is_some() && !self.protect.is_empty() {
+            // The device evaluates one ε for all tets: the protected ones again, on the host.
+            for t in (0..nt).filter(|&t| self.protect.get(t) == Some(&true)) {
+                (sc.f[t], sc.g[t]) =
+                    tet_terms(x, &self.tets[t], &self.d[t], self.w[t], 0.0, self.theta);
+            }
         }
         let gl = &sc.g;
         g.par_chunks_mut(3).enumerate().for_each(|(v, gv)| {
@@ -284,6 +300,20 @@ pub fn untangle_sliding(
     opts: &UntangleOptions,
     device: Option<&Context>,
 ) -> Result<UntangleStats, VolError> {
+    untangle_sliding_protected(rest, x, fixed, on_sphere, &[], opts, device)
+}
+
+/// [`untangle_sliding`] with the tets flagged in `protect` (per tet of `rest`, empty: none)
+/// kept positive when they start so (see [`untangle_protected`]).
+pub fn untangle_sliding_protected(
+    rest: &TetMesh,
+    x: &mut [[f64; 3]],
+    fixed: &[bool],
+    on_sphere: &[bool],
+    protect: &[bool],
+    opts: &UntangleOptions,
+    device: Option<&Context>,
+) -> Result<UntangleStats, VolError> {
     // The flags are checked against `x` by `untangle_cells`.
     if x.len() != rest.positions.len() {
         return Err(VolError::Input(format!(
@@ -301,7 +331,9 @@ pub fn untangle_sliding(
         d.push(c);
         vol.push(det.abs());
     }
-    untangle_cells(&rest.tets, d, vol, x, fixed, on_sphere, opts, device)
+    untangle_protected(
+        &rest.tets, d, vol, x, fixed, on_sphere, protect, opts, device,
+    )
 }
 
 /// [`untangle_sliding`] on cells given by their corner weights `d` (J = Xᵀ·D) and reference
@@ -310,11 +342,43 @@ pub fn untangle_sliding(
 #[allow(clippy::too_many_arguments)]
 pub fn untangle_cells(
     tets: &[[u32; 4]],
+    d: Vec<Corner>,
+    vol: Vec<f64>,
+    x: &mut [[f64; 3]],
+    fixed: &[bool],
+    on_sphere: &[bool],
+    opts: &UntangleOptions,
+    device: Option<&Context>,
+) -> Result<UntangleStats, VolError> {
+    untangle_protected(tets, d, vol, x, fixed, on_sphere, &[], opts, device)
+}
+
+/// [`untangle_cells`] where the tets flagged in `protect` (empty: none) that are positive at
+/// the start are measured with the ε → 0 limit of the energy, (1 − θ)‖J‖²/D^{2/3} +
+/// θ(D² + 1)/D, instead of the ε-regularised one.
+///
+/// Why: the regularisation is what lets the untangler pass through inverted configurations,
+/// and it does so for every tet alike: at a large ε a positive tet may be inverted to relieve
+/// its inverted neighbours, and once ε is small it sits behind the barrier the energy has
+/// become and cannot come back. For a tet that is already positive the limit energy is
+/// finite, and it is a barrier (+∞ at D ≤ 0): every accepted step (finite energy, Armijo)
+/// keeps such a tet positive, whatever ε the others use. The minimisers as ε → 0 are those
+/// of the unprotected problem (both energies tend to the same limit), so protection only
+/// removes the paths that go through inverting the protected tets.
+///
+/// Measured on the ball target (BENCHMARKS.md, issue 24 session 14) and not used there by
+/// default: protecting the tets with four boundary corners keeps them positive, but on the
+/// armadillo and Homer the untangler then stalls on tets with three boundary corners instead.
+/// No other caller in the library yet.
+#[allow(clippy::too_many_arguments)]
+pub fn untangle_protected(
+    tets: &[[u32; 4]],
     mut d: Vec<Corner>,
     vol: Vec<f64>,
     x: &mut [[f64; 3]],
     fixed: &[bool],
     on_sphere: &[bool],
+    protect: &[bool],
     opts: &UntangleOptions,
     device: Option<&Context>,
 ) -> Result<UntangleStats, VolError> {
@@ -324,6 +388,7 @@ pub fn untangle_cells(
         || tets.len() != vol.len()
         || fixed.len() != nv
         || !(on_sphere.is_empty() || on_sphere.len() == nv)
+        || !(protect.is_empty() || protect.len() == tets.len())
         || tets.iter().flatten().any(|&v| v as usize >= nv)
     {
         return Err(VolError::Input(format!(
@@ -382,12 +447,22 @@ pub fn untangle_cells(
             }
         }
     }
+    // Only tets positive at the start can be protected (their limit energy is finite there).
+    let protect: Vec<bool> = if protect.is_empty() {
+        Vec::new()
+    } else {
+        tets.iter()
+            .zip(protect)
+            .map(|(t, &p)| p && super::tet::is_positive(super::tet::det6(x, t)))
+            .collect()
+    };
     let prob = Problem::new(
         tets,
         d,
         vol.iter().map(|v| v / total).collect(),
         fixed,
         opts.theta,
+        &protect,
     );
     let mut sc = Scratch {
         device: match device {
