@@ -366,10 +366,11 @@ pub fn untangle_cells(
 /// of the unprotected problem (both energies tend to the same limit), so protection only
 /// removes the paths that go through inverting the protected tets.
 ///
-/// Measured on the ball target (BENCHMARKS.md, issue 24 session 14) and not used there by
-/// default: protecting the tets with four boundary corners keeps them positive, but on the
-/// armadillo and Homer the untangler then stalls on tets with three boundary corners instead.
-/// No other caller in the library yet.
+/// Not used by the ball target by default (BENCHMARKS.md, issue 24, session 16): protecting
+/// only the tets whose four corners are on the sphere keeps them positive, but the tets with
+/// three corners on the sphere are constrained almost as tightly (three corners fixed to a
+/// cap, one free), and the untangler then stalls on those instead; protection is the building
+/// block for holding a whole boundary layer. No other caller in the library yet.
 #[allow(clippy::too_many_arguments)]
 pub fn untangle_protected(
     tets: &[[u32; 4]],
