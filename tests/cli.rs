@@ -2,6 +2,13 @@
 //! JSON report checked against an independent recomputation from the written OBJ
 //! (tests/common/objcheck.rs). Uses only tests/data.
 
+// The rest of the CLI harness, in tests/cli/.
+mod cli {
+    mod bad_inputs;
+    mod determinism;
+    mod nothing_lost;
+}
+
 #[path = "common/objcheck.rs"]
 mod objcheck;
 
