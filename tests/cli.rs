@@ -9,19 +9,17 @@ mod cli {
     mod nothing_lost;
 }
 
-#[path = "common/objcheck.rs"]
-mod objcheck;
+mod common;
+use common::objcheck;
 
 use std::collections::BTreeSet;
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use serde_json::Value;
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-use tempdir::TempDir;
+use common::{data_obj as data, TempDir};
 
 /// Valid disks: `param` writes a map, `stats` says "disk: yes".
 const VALID: [&str; 5] = [
@@ -32,7 +30,7 @@ const VALID: [&str; 5] = [
     "camel_open",
 ];
 
-/// Valid meshes that are not disks: `param` cuts them into charts (checked in tests/atlas.rs).
+/// Valid meshes that are not disks: `param` cuts them into charts (checked in tests/param/atlas.rs).
 const CUT: [&str; 2] = ["bunny_npm", "block"];
 
 /// Invalid meshes and the words their one-line error must contain (besides the file name).
@@ -47,12 +45,6 @@ const PINCHED: [&str; 1] = ["bowtie_vertex"];
 
 /// Relative tolerance of report vs recomputation (the OBJ holds round-trip f64 text).
 const REL_TOL: f64 = 1e-6;
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(format!("{name}.obj"))
-}
 
 /// What a run of the binary did.
 struct Run {

@@ -2,6 +2,8 @@
 //! checkerboard renderer (`foldfree render`), and the engine embedded in a host's renderer.
 //! Every test runs under the validation layer.
 
+mod common;
+
 // The modules live in tests/gpu/ (an inline module maps the folder without `#[path]`).
 mod gpu {
     mod embed;

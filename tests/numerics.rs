@@ -1,9 +1,9 @@
 //! Numerics: Krylov solvers, small dense helpers, starting maps (Tutte, LSCM) and metrics.
 //! Each test name states the property it checks.
 
-#[path = "common/rng.rs"]
-mod rng;
-use rng::Rng;
+mod common;
+
+use common::{data_v_f as data, read_v_f as load_obj, Rng};
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
@@ -15,40 +15,6 @@ use foldfree::metrics;
 use sprs::{CsMat, TriMat};
 
 type Mesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
-
-/// Reads only `v` and `f` lines (the mesh module is tested elsewhere).
-fn load_obj(path: &Path) -> Mesh {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut positions = Vec::new();
-    let mut faces = Vec::new();
-    for line in text.lines() {
-        let mut it = line.split_whitespace();
-        match it.next() {
-            Some("v") => {
-                let c: Vec<f64> = it.take(3).map(|x| x.parse().unwrap()).collect();
-                positions.push([c[0], c[1], c[2]]);
-            }
-            Some("f") => {
-                let c: Vec<u32> = it
-                    .map(|x| x.split('/').next().unwrap().parse::<u32>().unwrap() - 1)
-                    .collect();
-                for k in 1..c.len() - 1 {
-                    faces.push([c[0], c[k], c[k + 1]]);
-                }
-            }
-            _ => {}
-        }
-    }
-    (positions, faces)
-}
-
-fn data(name: &str) -> Mesh {
-    load_obj(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data")
-            .join(name),
-    )
-}
 
 /// Boundary loops from directed edges whose reverse is absent, in the faces' direction.
 fn boundary_loops(faces: &[[u32; 3]]) -> Vec<Vec<u32>> {

@@ -3,9 +3,11 @@
 //! requested size, are not blank, keep the margins clear, and show pure red exactly when a
 //! face is flipped. Uses only tests/data (plus an ignored timing run on a shared mesh).
 
+mod common;
+
 use std::fs;
 use std::io::Cursor;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
@@ -13,17 +15,9 @@ use foldfree::mesh::TriMesh;
 use foldfree::param::admm::History;
 use foldfree::viz::{self, LayoutStyle};
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-use tempdir::TempDir;
+use common::{data_obj as data, TempDir};
 
 const RED: [u8; 3] = [255, 0, 0];
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(format!("{name}.obj"))
-}
 
 /// A decoded RGB8 picture.
 struct Image {

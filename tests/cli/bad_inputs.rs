@@ -33,9 +33,7 @@ enum Expect {
 
 use Expect::{Atlas, Error, Valid};
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-use tempdir::TempDir;
+use crate::common::TempDir;
 
 struct Case {
     file: &'static str,

@@ -12,15 +12,14 @@ use std::process::{Command, Stdio};
 use std::thread;
 use std::time::{Duration, Instant};
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-use tempdir::TempDir;
+use crate::common::gpu::vulkan_available;
+use crate::common::TempDir;
 
 /// A run that takes longer is a hang.
 const TIMEOUT: Duration = Duration::from_secs(180);
 
 fn camel() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/camel_open.obj")
+    crate::common::data("camel_open.obj")
 }
 
 /// `foldfree param camel_open.obj -o OUT --max-iters 300 -q EXTRA…` with `env` set; panics
@@ -128,21 +127,6 @@ fn cpu_output_does_not_depend_on_the_thread_count() {
         let out = dir.join(&format!("t{threads}.obj"));
         let many = param(&out, &extra, &[("RAYON_NUM_THREADS", threads)]);
         assert_same_bytes(&one, &many, &format!("RAYON_NUM_THREADS 1 vs {threads}"));
-    }
-}
-
-/// True when a Vulkan device can be opened; false (after saying so) when this machine has
-/// none. Panics under `REQUIRE_VULKAN=1`, and on any error other than "unavailable".
-fn vulkan_available() -> bool {
-    let require = std::env::var("REQUIRE_VULKAN").is_ok_and(|v| v == "1");
-    match foldfree::gpu::Context::new(&Default::default()) {
-        Ok(_) => true,
-        Err(e) if require => panic!("REQUIRE_VULKAN=1 but Vulkan is unavailable: {e}"),
-        Err(e) if e.is_unavailable() => {
-            eprintln!("skipped: no Vulkan ({e})");
-            false
-        }
-        Err(e) => panic!("creating the Vulkan context failed: {e}"),
     }
 }
 

@@ -2,20 +2,10 @@
 //! through the release binary as a user runs it. Each pins the exit code (the README's table),
 //! that inputs are never changed, and that a failed run leaves no file behind.
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-
 use std::fs;
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use tempdir::TempDir;
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
+use crate::common::{data, TempDir};
 
 struct Run {
     code: Option<i32>,

@@ -1,7 +1,6 @@
 //! Small glTF files built in tests: a triangle mesh with per-vertex normals and a TEXCOORD_0,
 //! as a `.glb` (indexed or not), and an independent reader (the `gltf` crate's) of what
-//! foldfree writes. Include with `#[path = "common/glb.rs"] mod glb;`.
-#![allow(dead_code)]
+//! foldfree writes.
 
 use serde_json::json;
 

@@ -1,9 +1,5 @@
-//! Shared helper for tests that need Vulkan: a validated context, or a clean skip.
-//!
-//! Include it with `#[path = "common/gpu.rs"] mod gpu_common;` (or `pub mod gpu;` from
-//! `tests/common/mod.rs`). With `REQUIRE_VULKAN=1` (set in CI) a missing Vulkan fails the test
-//! instead of skipping it.
-#![allow(dead_code)]
+//! Shared helper for tests that need Vulkan: a validated context, or a clean skip. With
+//! `REQUIRE_VULKAN=1` (set in CI) a missing Vulkan fails the test instead of skipping it.
 
 use foldfree::gpu::{Context, ContextDesc};
 
@@ -31,6 +27,12 @@ pub fn test_context() -> Option<Context> {
         }
         Err(e) => panic!("creating the Vulkan context failed: {e}"),
     }
+}
+
+/// Whether this machine has a usable Vulkan device ([`test_context`] succeeds): false after
+/// printing "skipped: no Vulkan"; panics instead under `REQUIRE_VULKAN=1`.
+pub fn vulkan_available() -> bool {
+    test_context().is_some()
 }
 
 /// Fails the test if the validation layer said anything.

@@ -1,6 +1,4 @@
-//! Checking a finished run of the `foldfree` binary. Include with
-//! `#[path = "common/run.rs"] mod run;`.
-#![allow(dead_code)]
+//! Checking a finished run of the `foldfree` binary.
 
 /// Panics with the exit status, stdout and stderr unless the run succeeded.
 pub fn check_ok(out: &std::process::Output, what: &str) {

@@ -1,11 +1,8 @@
-//! A per-test scratch directory, removed on drop; shared by the test binaries that run the
-//! `foldfree` CLI. Include with `#[path = "common/tempdir.rs"] mod tempdir;`.
-// Each test binary compiles its own copy and uses a subset of the methods.
-#![allow(dead_code)]
+//! A per-test scratch directory, removed on drop.
 
 use std::collections::BTreeSet;
 use std::fs;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// `<temp>/foldfree-<pid>-<test>`: the process id keeps parallel test binaries apart, the
 /// test name keeps parallel tests of one binary apart.
@@ -47,6 +44,12 @@ impl TempDir {
             hidden.is_empty(),
             "{context}: temporary files left behind: {hidden:?}"
         );
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
     }
 }
 

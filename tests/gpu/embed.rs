@@ -4,7 +4,7 @@
 //! buffers and debug messenger. Any validation message fails. Skips without Vulkan unless
 //! `REQUIRE_VULKAN=1`.
 
-#[path = "../examples/host_renderer.rs"]
+#[path = "../../examples/host_renderer.rs"]
 #[allow(dead_code)]
 mod host_renderer;
 
@@ -18,9 +18,7 @@ use foldfree::embed::{
 use foldfree::gpu::{vk, Context};
 use host_renderer::{Host, Unavailable};
 
-fn require_vulkan() -> bool {
-    std::env::var("REQUIRE_VULKAN").is_ok_and(|v| v == "1")
-}
+use crate::common::gpu::require_vulkan;
 
 /// The host with validation on, or `None` (skip) when this machine has no usable Vulkan.
 fn validated_host() -> Option<Host> {

@@ -3,41 +3,19 @@
 //! synchronization validation when `FOLDFREE_SYNC_VALIDATION=1`). Skips without Vulkan unless
 //! `REQUIRE_VULKAN=1`.
 
-#[path = "common/gpu.rs"]
-mod gpu_common;
+use crate::common::gpu as gpu_common;
 
 use std::fs;
 use std::io::Cursor;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
 use foldfree::gpu::{render_checker, RenderDesc, BACKGROUND};
 
-#[path = "common/run.rs"]
-mod run;
-use run::check_ok;
-#[path = "common/tempdir.rs"]
-mod tempdir;
-use tempdir::TempDir;
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
+use crate::common::gpu::vulkan_available;
+use crate::common::run::check_ok;
+use crate::common::{data, foldfree, TempDir};
 
 /// Whether Vulkan is usable here (panics under `REQUIRE_VULKAN=1` when it is not).
-fn vulkan_available() -> bool {
-    gpu_common::test_context().is_some()
-}
-
-fn foldfree(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_foldfree"))
-        .args(args)
-        .output()
-        .expect("run foldfree")
-}
-
 /// Success, or a run that stopped at its iteration cap and wrote its best map (exit 3).
 fn check_kept(out: &std::process::Output, what: &str) {
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -414,8 +392,7 @@ fn render_normals_reads_every_surface_format() {
     }
 }
 
-#[path = "common/glb.rs"]
-mod glb;
+use crate::common::glb;
 
 /// The glTF path draws the checker like the OBJ path: a sphere (an atlas, so seams split
 /// glTF vertices) mapped once into a `.glb` and once into an OBJ renders (near-)identically —

@@ -2,8 +2,7 @@
 //! validation layer on: every test also asserts that it produced no validation message.
 //! Run with `FOLDFREE_SYNC_VALIDATION=1` to add synchronization validation.
 
-#[path = "common/gpu.rs"]
-mod gpu_common;
+use crate::common::gpu as gpu_common;
 
 use std::time::{Duration, Instant};
 

@@ -7,19 +7,12 @@
 
 use std::fmt::Write as _;
 use std::fs;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
 use foldfree::mesh::formats::{parse_surface, Encoding, SurfaceFormat};
 use foldfree::mesh::{read_obj, read_surface, MeshError, TriMesh};
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-use tempdir::TempDir;
-
-fn data_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data")
-}
+use crate::common::{data_dir, TempDir};
 
 /// Every `tests/data/*.obj` (valid or not for the solvers: reading does not validate).
 fn data_meshes() -> Vec<(String, TriMesh)> {
@@ -486,10 +479,7 @@ fn tet_and_scene_formats_are_refused_by_name() {
 // ---- the CLI on generated files ----
 
 fn foldfree(args: &[&Path]) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
-        .args(args)
-        .output()
-        .expect("run foldfree");
+    let out = crate::common::foldfree(args);
     (
         out.status.code(),
         String::from_utf8_lossy(&out.stdout).into_owned(),

@@ -12,28 +12,10 @@ use std::process::Command;
 
 use serde_json::Value;
 
-#[path = "common/glb.rs"]
-mod glb;
-#[path = "common/run.rs"]
-mod run;
-#[path = "common/tempdir.rs"]
-mod tempdir;
-use glb::{Prim, ReadPrim};
-use run::check_ok;
-use tempdir::TempDir;
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
-
-fn foldfree(args: &[&Path]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_foldfree"))
-        .args(args)
-        .output()
-        .expect("run foldfree")
-}
+use crate::common::glb;
+use crate::common::glb::{Prim, ReadPrim};
+use crate::common::run::check_ok;
+use crate::common::{data, foldfree, TempDir};
 
 fn obj(name: &str) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
     let m = foldfree::mesh::read_obj(&data(name)).expect("test mesh");

@@ -1,7 +1,7 @@
 //! OBJ reading/writing, topology and face frames, checked against the documented facts of the
 //! meshes in tests/data (see tests/data/README.md) and against small meshes built here.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use foldfree::mesh::obj::{
     obj_text_with_corner_uv, obj_text_with_uv, parse_obj, parse_obj_with_info, read_obj,
@@ -9,26 +9,7 @@ use foldfree::mesh::obj::{
 };
 use foldfree::mesh::{frames, MeshError, Topology, TriMesh, NO_FACE};
 
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
-
-/// A fresh, empty scratch directory per test.
-fn scratch(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "foldfree-mesh-topology-{}-{test}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn mem() -> &'static Path {
-    Path::new("<memory>")
-}
+use crate::common::{data, mem, TempDir};
 
 fn topo_of(mesh: &TriMesh) -> Topology {
     Topology::build(mesh, mem()).unwrap()
@@ -631,7 +612,7 @@ fn obj_empty_inputs_are_empty_errors() {
         parse("# nothing\nv 0 0 0\nv 1 0 0\n"),
         Err(MeshError::Empty { .. })
     ));
-    let dir = scratch("empty");
+    let dir = TempDir::new("topology_empty");
     let path = dir.join("zero.obj");
     std::fs::write(&path, b"").unwrap();
     assert!(matches!(read_obj(&path), Err(MeshError::Empty { file, .. }) if file == path));
@@ -639,7 +620,7 @@ fn obj_empty_inputs_are_empty_errors() {
 
 #[test]
 fn obj_binary_and_non_utf8_files_are_read_errors() {
-    let dir = scratch("binary");
+    let dir = TempDir::new("topology_binary");
     let garbage: Vec<u8> = (0..4096u32)
         .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
         .collect();
@@ -666,7 +647,7 @@ fn obj_binary_and_non_utf8_files_are_read_errors() {
 
 #[test]
 fn obj_missing_file_is_a_read_error() {
-    let path = scratch("missing").join("nope.obj");
+    let path = TempDir::new("topology_missing").join("nope.obj");
     match read_obj(&path) {
         Err(e @ MeshError::Read { .. }) => assert!(e.to_string().contains("nope.obj")),
         other => panic!("expected Read error, got {other:?}"),
@@ -703,7 +684,7 @@ fn vt_lines(text: &str) -> Vec<[f64; 2]> {
 
 #[test]
 fn write_obj_with_uv_round_trips_exactly() {
-    let dir = scratch("write_uv");
+    let dir = TempDir::new("topology_write_uv");
     let path = dir.join("out.obj");
     let mut mesh = read_obj(&data("unreferenced_vertex.obj")).unwrap();
     mesh.positions[1] = [0.1 + 0.2, -0.0, 1e-300];
@@ -742,7 +723,7 @@ fn write_obj_with_uv_round_trips_exactly() {
 
 #[test]
 fn write_obj_with_corner_uv_writes_per_corner_indices() {
-    let dir = scratch("write_corner_uv");
+    let dir = TempDir::new("topology_write_corner_uv");
     let path = dir.join("seams.obj");
     let mesh = read_obj(&data("two_triangles.obj")).unwrap();
     let uv = vec![
@@ -779,7 +760,7 @@ fn obj_text_refuses_wrong_uv_count_and_non_finite_numbers() {
 
 #[test]
 fn outputs_replace_existing_files_and_report_missing_directories() {
-    let dir = scratch("atomic");
+    let dir = TempDir::new("topology_atomic");
     let path = dir.join("report.json");
     for text in [&b"first"[..], b"second"] {
         let mut o = foldfree::files::Outputs::new();
@@ -849,7 +830,7 @@ fn frames_of_a_right_triangle_and_a_degenerate_face() {
 
 // ---------------------------------------------------------------- timing
 
-/// `cargo test --release --test mesh_topology -- --ignored --nocapture topology_timing`
+/// `cargo test --release --test mesh -- --ignored --nocapture topology_timing`
 #[test]
 #[ignore = "needs /work/shared/meshes and a release build"]
 fn topology_timing_on_igea_249k() {

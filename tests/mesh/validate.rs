@@ -1,20 +1,12 @@
 //! Validation: each data file's documented verdict (tests/data/README.md) and one small mesh
 //! per failure, including the order in which failures are reported.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use foldfree::mesh::validate::{validate, validate_with_topology};
 use foldfree::mesh::{load, MeshError, TriMesh, ValidateOptions};
 
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
-
-fn mem() -> &'static Path {
-    Path::new("<memory>")
-}
+use crate::common::{data, mem, Rng};
 
 fn check(mesh: &TriMesh) -> Result<foldfree::mesh::ValidationReport, MeshError> {
     validate(mesh, mem(), &ValidateOptions::default())
@@ -385,7 +377,7 @@ fn read_errors_pass_through_load() {
 type Row = (&'static str, usize, usize, usize, usize, i64, i64, usize);
 
 /// Every surface mesh of ../shared/meshes against its README row (V, F, components, loops, chi,
-/// genus). `cargo test --release --test mesh_validate -- --ignored --nocapture shared_meshes`
+/// genus). `cargo test --release --test mesh -- --ignored --nocapture shared_meshes`
 #[test]
 #[ignore = "needs /work/shared/meshes; reads ~40 MB"]
 fn shared_meshes_match_their_readme() {
@@ -427,20 +419,6 @@ fn shared_meshes_match_their_readme() {
         assert_eq!(topo.genus(), Some(genus), "{name}");
         assert_eq!(report.unreferenced_vertices.len(), unref, "{name}");
         assert_eq!(topo.is_disk(), name.starts_with("disk/"), "{name}");
-    }
-}
-
-/// Small xorshift generator: deterministic, no dependency.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
     }
 }
 

@@ -2,36 +2,17 @@
 //! consensus than plain ADMM in the same number of iterations, never cost more than plain ADMM
 //! plus the rejected steps, keep every returned map flip-free, and be refused on Vulkan.
 
-use std::path::Path;
 use std::process::Command;
 
 use foldfree::init::tutte::TutteWeights;
-use foldfree::init::{initial_map, normalize_area, InitMethod};
-use foldfree::mesh::{self, Topology, TriMesh};
+use foldfree::init::InitMethod;
+use foldfree::mesh::TriMesh;
 use foldfree::param::admm::driver::{map_energy, Executor};
 use foldfree::param::admm::{self, cpu::CpuExecutor, Accel, AdmmOptions, AdmmProblem, AdmmState};
 use foldfree::param::Energy;
 
-fn data(name: &str) -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
-
-fn load(name: &str) -> (TriMesh, Topology, AdmmProblem) {
-    let (m, t, _) =
-        mesh::load(&data(name), &mesh::ValidateOptions::default()).expect("test mesh loads");
-    let frames = mesh::frames::compute(&m);
-    let p = AdmmProblem::new(&m, &t, &frames);
-    (m, t, p)
-}
-
-fn start(m: &TriMesh, t: &Topology, init: InitMethod) -> Vec<[f64; 2]> {
-    let mut uv = initial_map(m, t, init).expect("start map");
-    let area: f64 = mesh::frames::compute(m).area.iter().sum();
-    normalize_area(m, &mut uv, area);
-    uv
-}
+use crate::common::data;
+use crate::{load, start};
 
 /// Relative primal and dual residuals after `iters` iterations at a fixed stable μ.
 fn residual_after(

@@ -6,27 +6,12 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use foldfree::init::tutte::TutteWeights;
-use foldfree::init::{initial_map, normalize_area, InitMethod};
+use foldfree::init::InitMethod;
 use foldfree::mesh::{self, Topology, TriMesh};
 use foldfree::param::admm::{self, cpu::CpuExecutor, driver::map_energy, AdmmOptions, AdmmProblem};
 use foldfree::param::Energy;
 
-fn load(name: &str) -> (TriMesh, Topology, AdmmProblem) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name);
-    let (m, t, _) = mesh::load(&path, &mesh::ValidateOptions::default()).expect("test mesh loads");
-    let frames = mesh::frames::compute(&m);
-    let p = AdmmProblem::new(&m, &t, &frames);
-    (m, t, p)
-}
-
-fn start(m: &TriMesh, t: &Topology, init: InitMethod) -> Vec<[f64; 2]> {
-    let mut uv = initial_map(m, t, init).expect("start map");
-    let area: f64 = mesh::frames::compute(m).area.iter().sum();
-    normalize_area(m, &mut uv, area);
-    uv
-}
+use crate::{load, start};
 
 /// An unstable penalty (μ·F = 0.1, no adaptation) on the hard camel still returns a flip-free
 /// map: the best flip-free recovered map, or the Tutte fallback.

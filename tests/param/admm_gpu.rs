@@ -17,13 +17,9 @@
 //!
 //! Measured differences are printed (`--nocapture` to see them).
 
-#[path = "common/gpu.rs"]
-mod gpu_common;
-#[path = "common/rng.rs"]
-mod rng;
-use rng::Rng;
+use crate::common::gpu as gpu_common;
+use crate::common::{data, Rng};
 
-use std::path::PathBuf;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
@@ -103,15 +99,8 @@ struct Fixture {
     fallback: Option<Vec<[f64; 2]>>,
 }
 
-fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
-
 fn load(name: &'static str) -> Fixture {
-    let (mesh, topo, _) =
-        mesh::load(&data(name), &mesh::ValidateOptions::default()).expect("test mesh loads");
+    let (mesh, topo) = crate::common::load(name);
     let frames = mesh::frames::compute(&mesh);
     let area_3d: f64 = frames.area.iter().sum();
     let problem = AdmmProblem::new(&mesh, &topo, &frames);

@@ -4,30 +4,17 @@
 //! charts pairwise disjoint inside the unit square, and the report's metrics equal to an
 //! independent recomputation (tests/common/objcheck.rs).
 
-#[path = "common/objcheck.rs"]
-mod objcheck;
-#[path = "common/tempdir.rs"]
-mod tempdir;
+use crate::common::objcheck;
 
 use std::collections::HashMap;
 use std::fs;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
+use crate::common::{data_obj as data, TempDir};
 use serde_json::Value;
-use tempdir::TempDir;
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(format!("{name}.obj"))
-}
 
 fn foldfree(args: &[&str]) -> (Option<i32>, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_foldfree"))
-        .args(args)
-        .output()
-        .expect("run foldfree");
+    let out = crate::common::foldfree(args);
     (
         out.status.code(),
         String::from_utf8_lossy(&out.stderr).into(),
@@ -476,7 +463,7 @@ fn cut_none_refuses_a_closed_mesh() {
 
 /// The acceptance sweep over the shared meshes that are not disks (closed, open with several
 /// holes, CAD). Not part of `cargo test` (tests must not need `../shared`): run it with
-/// `FOLDFREE_SHARED_MESHES=../shared/meshes cargo test --release --test atlas -- --ignored --nocapture`.
+/// `FOLDFREE_SHARED_MESHES=../shared/meshes cargo test --release --test param shared_meshes_sweep -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn shared_meshes_sweep() {

@@ -1,43 +1,25 @@
 //! The global solver (`--solver global`, `param::global`): exactness on a flat grid, quality
 //! and validity on the camel, derivative and step-bound checks, monotone descent, the CLI.
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-
 use std::path::Path;
 use std::process::Command;
 
+use crate::common::{Rng, TempDir};
 use foldfree::init::tutte::TutteWeights;
 use foldfree::init::{initial_map, normalize_area, InitMethod};
 use foldfree::mesh::{self, FaceFrames, Topology, TriMesh};
 use foldfree::metrics;
 use foldfree::param::global::{self, line_search, GlobalOptions, Phase, StopReason};
 use foldfree::param::Energy;
-use tempdir::TempDir;
 
 fn load(name: &str) -> (TriMesh, Topology, FaceFrames, Vec<[f64; 2]>) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name);
-    let (m, topo, _) = mesh::load(&path, &mesh::ValidateOptions::default()).expect("load");
+    let (m, topo) = crate::common::load(name);
     let frames = mesh::frames::compute(&m);
     let area: f64 = frames.area.iter().sum();
     let mut uv =
         initial_map(&m, &topo, InitMethod::Tutte(TutteWeights::Uniform)).expect("tutte start");
     normalize_area(&m, &mut uv, area);
     (m, topo, frames, uv)
-}
-
-/// Deterministic pseudo-random numbers in [0, 1) (no dev-dependency needed).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 #[test]
@@ -172,7 +154,7 @@ fn mesh_gradient_matches_finite_differences() {
     for energy in [Energy::SymmetricDirichlet, Energy::Mips] {
         let (e, g) = global::objective_and_gradient(&m, &frames, energy, &uv).unwrap();
         assert!(e.is_finite());
-        let mut rng = Lcg(7);
+        let mut rng = Rng(7);
         for _ in 0..20 {
             let i = (rng.next() * (2 * uv.len()) as f64) as usize;
             // Relative step on the coordinate: central differences, O(h²) error.
@@ -202,7 +184,7 @@ fn mesh_gradient_matches_finite_differences() {
 fn max_flip_free_step_is_the_first_determinant_root() {
     // Random triangles (positively oriented in UV) and random directions: the step bound is
     // exactly where the first face degenerates.
-    let mut rng = Lcg(42);
+    let mut rng = Rng(42);
     let g = [[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]];
     let faces = [[0u32, 1, 2]];
     let mut checked = 0;

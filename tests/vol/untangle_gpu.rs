@@ -9,11 +9,8 @@
 //! rounded to f32 before the CPU twin sees it, so the comparison measures the kernel's
 //! arithmetic only.
 
-#[path = "common/gpu.rs"]
-mod gpu_common;
-#[path = "common/rng.rs"]
-mod rng;
-use rng::Rng;
+use crate::common::gpu as gpu_common;
+use crate::common::Rng;
 
 use foldfree::vol::newton::{corners_of, Corner};
 use foldfree::vol::untangle::vulkan::DeviceTets;

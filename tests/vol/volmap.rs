@@ -1,23 +1,14 @@
 //! Volumetric maps (`foldfree::vol`): readers' located errors, the energy's derivatives, and
 //! the pipeline on tiny tet meshes with known answers.
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
+use crate::common::{data, TempDir};
 use foldfree::vol::energy::mul3;
 use foldfree::vol::newton::{corner_weights, Objective};
 use foldfree::vol::untangle::{untangle, UntangleOptions};
 use foldfree::vol::{evaluate, read_any, volmap, write_any, TetMesh, VolError, VolmapOptions};
-use tempdir::TempDir;
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
 
 /// A tet split into four around an interior vertex (index 4) at its centroid.
 fn star_tet() -> TetMesh {
