@@ -7,4 +7,5 @@ mod common;
 // The modules live in tests/regression/ (an inline module maps the folder without `#[path]`).
 mod regression {
     mod fuzz;
+    mod sweep;
 }
