@@ -2,8 +2,8 @@
 # Validates glTF files (.glb, or .gltf with its .bin) with the Khronos glTF validator, the npm
 # package gltf-validator, installed on first use into target/gltf-validator (or
 # $GLTF_VALIDATOR_DIR). Prints each file's error/warning/info counts and its errors and
-# warnings; exits 1 when any file has an error. ci/test runs tests/gltf.rs with it where it installs;
-# tests/gltf.rs calls it when FOLDFREE_GLTF_VALIDATOR=1. With no file: installs it, validates nothing.
+# warnings; exits 1 when any file has an error. ci/test runs tests/mesh/gltf.rs with it where it installs;
+# tests/mesh/gltf.rs calls it when FOLDFREE_GLTF_VALIDATOR=1. With no file: installs it, validates nothing.
 #   bash ci/gltf_validate.sh out.glb other.gltf
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)

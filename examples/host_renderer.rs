@@ -18,7 +18,7 @@
 //!
 //! Run: `cargo run --release --example host_renderer [mesh.obj]`.
 //!
-//! `tests/embed.rs` includes this file as a module and runs the same flow under validation.
+//! `tests/gpu/embed.rs` includes this file as a module and runs the same flow under validation.
 
 use std::error::Error;
 use std::ffi::{c_char, c_void, CStr};

@@ -262,7 +262,7 @@ impl AdmmOptions {
     /// take different paths once the device's floor reaches that threshold. The bounds stop
     /// balancing at μ·F 6.25 (MIPS, start 100) and 15.6 (SD, start 1000), where the measured f32
     /// floor is at most that threshold (BENCHMARKS.md, "Stopping test and μ adaptation"); the
-    /// CPU/Vulkan agreement test (tests/admm_gpu.rs) checks that the backends still follow one
+    /// CPU/Vulkan agreement test (tests/param/admm_gpu.rs) checks that the backends still follow one
     /// path.
     pub fn mu_shrink_max(&self) -> f64 {
         self.mu_shrink_max.unwrap_or(match self.energy {
@@ -717,7 +717,7 @@ pub fn solve(
             // Hysteresis: μ at which the iteration stalled is below the stability threshold;
             // residual balancing never goes back under it (otherwise the two rules alternate,
             // halving on a tight consensus and raising on the stall, until μ reaches its bound;
-            // tests/admm_driver.rs scripts that history).
+            // tests/param/admm_driver.rs scripts that history).
             mu_floor = mu_floor.max(2.0 * mu_rel);
             mu_rel *= 2.0;
             best_primal = primal;
