@@ -22,12 +22,14 @@ pub use crate::gpu::BackendChoice;
 
 /// When `foldfree param` cuts the mesh into disk charts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum CutMode {
     /// Cut only meshes that are not a single disk (closed, higher genus, several holes, several
     /// components).
     #[default]
     Auto,
     /// Never cut: a mesh that is not a disk is an error.
+    #[cfg_attr(feature = "cli", value(name = "none"))]
     Never,
     /// Always go through the cutting and packing path, even for a disk (one chart, packed into
     /// the unit square).

@@ -22,6 +22,7 @@ use crate::Result;
 
 /// Which solver runs after the start map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum SolverChoice {
     /// Output the start map as is.
     None,
