@@ -117,10 +117,17 @@ pub struct ParamOutput {
     pub report: ParamReport,
 }
 
-/// Opens a Vulkan context for `job`, or None for the CPU backend.
+/// Opens a Vulkan context for `job`, or None for the CPU backend. Anderson acceleration exists
+/// on the CPU backend only: `Auto` means the CPU then.
 fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
+    let backend = match job.backend {
+        BackendChoice::Auto if job.admm.accel != crate::param::admm::Accel::None => {
+            BackendChoice::Cpu
+        }
+        b => b,
+    };
     Ok(crate::gpu::open_backend(
-        job.backend,
+        backend,
         job.device.as_deref(),
         job.validation,
     )?)
@@ -132,6 +139,12 @@ fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
 /// every global-solver iteration.
 pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Result<ParamOutput> {
     let t0 = Instant::now();
+    if job.admm.accel != crate::param::admm::Accel::None && job.backend == BackendChoice::Vulkan {
+        return Err(Error::Usage(
+            "[admm] accel = \"anderson\" runs on the CPU backend only (use --backend cpu or auto)"
+                .into(),
+        ));
+    }
     job.admm.validate()?;
     job.cut_options.validate()?;
     job.pack.validate()?;

@@ -375,7 +375,9 @@ fn run_admm(
     };
     match device {
         Some(_) if opts.accel != admm::Accel::None => Err(crate::Error::Usage(
-            "--accel anderson runs on the CPU backend only (use --backend cpu)".into(),
+            "ADMM's Anderson acceleration (accel = \"anderson\") runs on the CPU backend only \
+             (use --backend cpu)"
+                .into(),
         )),
         Some(device) => {
             let ctx = device.ctx;

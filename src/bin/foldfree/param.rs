@@ -7,7 +7,6 @@ use std::sync::Arc;
 use foldfree::files::DEFAULT_MAX_ELEMENTS;
 use foldfree::init::tutte::TutteWeights;
 use foldfree::init::InitMethod;
-use foldfree::param::admm::Accel;
 use foldfree::param::{self, BackendChoice, CutMode, Energy, ParamJob, SolverChoice};
 
 use crate::{element_limit, read_tuning};
@@ -116,13 +115,6 @@ pub fn run_param(args: ParamArgs) -> foldfree::Result<()> {
                 .into(),
         ));
     }
-    let accelerated = tuning.admm.accel != Accel::None;
-    if accelerated && args.backend == BackendChoice::Vulkan {
-        return Err(foldfree::Error::Usage(
-            "[admm] accel = \"anderson\" runs on the CPU backend only (use --backend cpu or auto)"
-                .into(),
-        ));
-    }
     let init = match args.init {
         Some(i) => i,
         None if solver != SolverChoice::Admm => InitMethod::Tutte(TutteWeights::Uniform),
@@ -165,11 +157,9 @@ pub fn run_param(args: ParamArgs) -> foldfree::Result<()> {
     } else {
         SolverChoice::Global
     });
-    job.backend = match (args.backend, accelerated) {
-        // Anderson acceleration exists on the CPU backend only: `auto` means the CPU then.
-        (BackendChoice::Auto, true) => BackendChoice::Cpu,
-        (b, _) => b,
-    };
+    // With `[admm] accel = "anderson"` the library runs `auto` on the CPU (and refuses
+    // `vulkan`): the acceleration exists on the CPU backend only.
+    job.backend = args.backend;
     job.device = args.device.clone();
     job.validation = args.validation;
     job.profile = args.profile;
