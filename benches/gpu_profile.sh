@@ -25,4 +25,4 @@ fi
 cargo build --release --locked --quiet
 echo "# foldfree gpu profile — $(date -u +%Y-%m-%d), $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
 echo
-target/release/foldfree bench --profile --max-iters "$iters" --out-dir target/gpu-profile "${meshes[@]}"
+target/release/foldfree dev bench --profile --max-iters "$iters" --out-dir target/gpu-profile "${meshes[@]}"

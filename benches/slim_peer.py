@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The libigl SLIM side of BENCHMARKS.md, run on the same machine as `foldfree bench`.
+"""The libigl SLIM side of BENCHMARKS.md, run on the same machine as `foldfree dev bench`.
 
 Usage: python3 benches/slim_peer.py MESH.obj [sd|conformal] [max_iters]
 Needs `pip install libigl scipy`. Start map: Tutte (uniform) on the unit circle, as libigl's

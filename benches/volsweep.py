@@ -9,7 +9,7 @@ Usage:
 A folder stands for every `*.mesh` in it, except `*_init.mesh` files: those are the initial maps of
 the rest mesh named `*_rest.mesh` beside them, and give that mesh the `fix` case. Cases:
   ball     volmap REST --target ball --write-constraints C      (boundary onto the unit sphere)
-  twist90  volmap-constraints REST --twist 90 -o C; volmap REST --constraints C
+  twist90  dev volmap-constraints REST --twist 90 -o C; volmap REST --constraints C
   fix      volmap REST --init INIT --fix-boundary               (only where an init exists)
 each with `-o DIR/out/NAME.CASE.mesh --report DIR/reports/NAME.CASE.json -q EXTRA_VOLMAP_ARGS`, as its
 own process group, `--jobs` at a time, killed after `--timeout` s.
@@ -155,7 +155,7 @@ class VolSweep:
         if case == "ball":
             cmd += ["--target", "ball", "--write-constraints", str(cons)]
         elif case == "twist90":
-            code, _ = self.call([b, "volmap-constraints", str(rest), "--twist", "90", "-o", str(cons)], log, 60)
+            code, _ = self.call([b, "dev", "volmap-constraints", str(rest), "--twist", "90", "-o", str(cons)], log, 60)
             if code != 0:
                 cmd = None
             else:

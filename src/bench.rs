@@ -1,4 +1,4 @@
-//! `foldfree bench`: runs `param` over meshes × energies × backends in one process and prints
+//! `foldfree dev bench`: runs `param` over meshes × energies × backends in one process and prints
 //! a Markdown table (the source of the numbers in BENCHMARKS.md). Timing lives here, never in
 //! unit tests.
 #![forbid(unsafe_code)]

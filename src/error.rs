@@ -32,6 +32,9 @@ pub enum Error {
     /// writing the outputs failed at the end (exit 1, nothing left behind).
     #[error(transparent)]
     File(#[from] crate::files::FileError),
+    /// An option outside its range (exit 2), from an option type's `validate()`.
+    #[error(transparent)]
+    Option(#[from] OptionError),
     /// The request itself is wrong (bad option combination, refusing to overwrite the input).
     #[error("{0}")]
     Usage(String),
@@ -46,13 +49,44 @@ impl Error {
     /// not converge, 1 for everything else.
     pub fn exit_code(&self) -> i32 {
         match self {
-            Error::Mesh(_) | Error::Usage(_) => 2,
+            Error::Mesh(_) | Error::Usage(_) | Error::Option(_) => 2,
             Error::Gpu(crate::gpu::GpuError::NoSuchDevice(_)) => 2,
             Error::Gpu(_) | Error::Solve(_) | Error::Io { .. } => 1,
             Error::NotConverged(_) => 3,
             Error::Approx(e) => e.exit_code(),
             Error::Vol(e) => e.exit_code(),
             Error::File(e) => e.exit_code(),
+        }
+    }
+}
+
+/// A setting outside its meaningful range: what every option type's `validate()` returns
+/// (`AdmmOptions`, `CutOptions`, `PackOptions`, `VolmapOptions`), in one message shape,
+/// `OPTIONS option KEY = VALUE is outside its range RANGE`. `key` is the setting's name in a
+/// tuning file ([`crate::tuning`]), so a host can point at the line that set it.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{options} option {key} = {value} is outside its range {range}")]
+pub struct OptionError {
+    /// Which option type: `ADMM`, `cut`, `pack`, `volmap`.
+    pub options: &'static str,
+    /// The setting's key (a dotted path for nested settings, e.g. `post.max_iters`).
+    pub key: String,
+    pub value: String,
+    pub range: String,
+}
+
+impl OptionError {
+    pub fn new(
+        options: &'static str,
+        key: &str,
+        value: impl std::fmt::Display,
+        range: &str,
+    ) -> OptionError {
+        OptionError {
+            options,
+            key: key.to_string(),
+            value: value.to_string(),
+            range: range.to_string(),
         }
     }
 }

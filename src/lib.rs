@@ -7,6 +7,8 @@
 
 pub mod approx;
 pub mod bench;
+#[cfg(feature = "cli")]
+pub mod cli;
 pub mod embed;
 pub mod error;
 pub mod files;
@@ -17,7 +19,8 @@ pub mod mesh;
 pub mod metrics;
 pub mod param;
 pub mod report;
+pub mod tuning;
 pub mod viz;
 pub mod vol;
 
-pub use error::{Error, Result};
+pub use error::{Error, OptionError, Result};

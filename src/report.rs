@@ -150,3 +150,74 @@ pub struct AtlasReport {
     pub injective_pieces: usize,
     pub seconds_cut: f64,
 }
+
+/// The summary `foldfree param` prints: what ran, how far it converged, the distortion, and
+/// the atlas and device-time lines when there are any (one line each, no trailing newline).
+impl std::fmt::Display for ParamReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self;
+        write!(
+            f,
+            "foldfree: {} → {}: {} faces, backend {} ({}), init {}, solver {}",
+            r.input, r.output, r.faces, r.backend, r.device, r.init, r.solver_path
+        )?;
+        match r.converged {
+            Some(true) => write!(f, ", converged in {} iterations", r.iterations)?,
+            Some(false) => write!(
+                f,
+                ", NOT converged after {} iterations (best flip-free map written)",
+                r.iterations
+            )?,
+            None => {}
+        }
+        if r.solver_path == "admm+global" {
+            write!(f, "\n  {}", r.stop)?;
+        }
+        write!(
+            f,
+            "\n  flips {}  δcon mean {:.4} (area-weighted {:.4}, max {:.3})  MIPS {:.5}  SD {:.5}  boundary overlaps {}  {:.2} s",
+            r.flips,
+            r.delta_con_mean,
+            r.delta_con_area_mean,
+            r.delta_con_max,
+            r.mips_energy,
+            r.sd_energy,
+            r.boundary_self_intersections,
+            r.seconds
+        )?;
+        if let Some(a) = &r.atlas {
+            write!(
+                f,
+                "\n  cut: {} chart(s), {} seam edges (length {:.4}), {} vt; packed in {} page(s) of {}² with {} texels padding: efficiency {:.1}% of the area, {:.1}% of the texels",
+                a.charts,
+                a.seam_edges,
+                a.seam_length,
+                a.texture_coordinates,
+                a.pages,
+                a.resolution,
+                a.padding,
+                100.0 * a.packing_efficiency,
+                100.0 * a.texel_coverage
+            )?;
+            if a.overlap_splits + a.injective_pieces > 0 {
+                write!(
+                    f,
+                    "\n  charts whose map overlapped itself: {} split by a seam and re-mapped, {} more cut into pieces that keep their map",
+                    a.overlap_splits, a.injective_pieces
+                )?;
+            }
+        }
+        if let Some(t) = &r.kernel_times {
+            let per = |ns: u64| ns as f64 / 1e3 / t.iterations.max(1) as f64;
+            write!(
+                f,
+                "\n  device time per iteration: face_newton {:.1} µs, edge_project {:.1} µs, dual_update {:.1} µs; residual {:.1} µs per check",
+                per(t.face_newton_ns),
+                per(t.edge_project_ns),
+                per(t.dual_update_ns),
+                t.residual_ns as f64 / 1e3 / r.history.len().max(1) as f64
+            )?;
+        }
+        Ok(())
+    }
+}

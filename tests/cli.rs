@@ -687,35 +687,33 @@ fn face_limit_is_enforced() {
     );
 }
 
-/// `--recovery bfs` (the seed's breadth-first recovery) runs ADMM to convergence on the flat
-/// grid and writes a flip-free map that the independent checker scores; with the global solver
-/// it is a usage error (exit 2), since that solver has no per-face maps to recover from.
+/// `[admm] recovery = "bfs"` in a tuning file (the seed's breadth-first recovery) runs ADMM to
+/// convergence on the flat grid and writes a flip-free map that the independent checker scores.
+/// (The global solver has no per-face maps to recover from; `--solver global` does not read the
+/// `[admm]` table.)
 #[test]
 fn param_with_breadth_first_recovery() {
     let tmp = TempDir::new("param_with_breadth_first_recovery");
     let input = data("square_grid_10x10");
     let out = tmp.join("grid_bfs.obj");
     let rep = tmp.join("grid_bfs.json");
+    let tuning = tmp.join("bfs.toml");
+    fs::write(&tuning, "[admm]\nrecovery = \"bfs\"\n").expect("write tuning");
     let r = param(
         &input,
         &out,
         &rep,
-        &["--backend", "cpu", "--recovery", "bfs"],
+        &[
+            "--backend",
+            "cpu",
+            "--tuning",
+            tuning.to_str().expect("utf-8"),
+        ],
     );
     r.assert_code(0);
     let report = read_report(&rep);
     let (metrics, _) = check_output(&input, &out, &report);
     assert_eq!(metrics.flips, 0, "{}", r.what);
-
-    let out = tmp.join("grid_bfs_global.obj");
-    let r = param(
-        &input,
-        &out,
-        &tmp.join("g.json"),
-        &["--solver", "global", "--recovery", "bfs"],
-    );
-    r.assert_code(2);
-    assert!(!out.exists(), "{}: wrote output on a usage error", r.what);
 }
 
 /// Pins: a pinched vertex is bad input for `stats` (exit 2, named) and split by `param`: exit 0,

@@ -1177,3 +1177,38 @@ impl EndStage<'_> {
         Ok(out)
     }
 }
+
+/// The summary `foldfree approx` prints: regions and polygons, then distances and folds, then
+/// the notes (no trailing newline).
+impl std::fmt::Display for ApproxReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self;
+        write!(
+            f,
+            "foldfree approx: {} faces → {} regions (K = {}), {} polygons, {} corners, {:.2} s ({} run{}, seed {} kept)",
+            r.faces,
+            r.k_obtained,
+            r.k_requested,
+            r.polygons,
+            r.corners,
+            r.seconds_all_runs,
+            r.runs,
+            if r.runs == 1 { "" } else { "s" },
+            r.seed_used
+        )?;
+        write!(
+            f,
+            "\n  input→plane distance mean {:.4e} ({:.2e}·diag), max {:.4e}; planarity of output {:.2e}·diag; flipped {}, degenerate {}",
+            r.mean_input_distance,
+            r.mean_input_distance_rel,
+            r.max_input_distance,
+            r.max_planarity_deviation_rel,
+            r.flipped_faces,
+            r.degenerate_faces
+        )?;
+        for n in &r.notes {
+            write!(f, "\n  note: {n}")?;
+        }
+        Ok(())
+    }
+}

@@ -4,6 +4,7 @@ use super::{Context, ContextDesc, GpuError, DEVICE_ENV};
 
 /// Where the device kernels of a job run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum BackendChoice {
     /// Vulkan on a real GPU; the CPU backend when the only device is a CPU rasterizer or none.
     Auto,

@@ -39,6 +39,7 @@ pub struct RenderDesc {
 
 /// What colours the surface.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Shade {
     /// A checkerboard through the UVs: the texture-mapping check.
     #[default]

@@ -34,7 +34,8 @@ use super::SolveError;
 pub const PARALLEL_ROWS: usize = 20_000;
 
 /// Which preconditioner a Krylov solve uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Preconditioner {
     /// No preconditioning (for tests and comparisons).
     None,
@@ -52,7 +53,8 @@ pub enum Preconditioner {
 }
 
 /// Options of a Krylov solve.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct CgOptions {
     /// Stop when ‖b − Ax‖ ≤ tolerance·‖b‖.
     pub tolerance: f64,

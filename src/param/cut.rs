@@ -36,9 +36,13 @@ use crate::init::vec3;
 use crate::mesh::{MeshError, Topology, TriMesh, NO_FACE};
 
 /// How seams are chosen.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The `[cut]` table of a tuning file ([`crate::tuning`]; `curvature_weight` spelt
+/// `seam_curvature`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct CutOptions {
     /// β: how strongly seams prefer curved regions (0 = shortest seams).
+    #[serde(rename = "seam_curvature")]
     pub curvature_weight: f64,
     /// At most this many extra seams, each to the vertex whose conformal start map is shrunk
     /// the most, while that shrink exceeds `stretch_limit`.
@@ -67,11 +71,13 @@ impl CutOptions {
     /// Checks every setting against its range (usage errors, exit 2 in the CLI; hosts get the
     /// same): each extra or splitting seam costs a map of the charts, so their counts are
     /// capped where more could only turn a long run into a hang; the weights are finite.
-    pub fn validate(&self) -> crate::Result<()> {
-        fn bad(what: &str, value: impl std::fmt::Display, range: &str) -> crate::Result<()> {
-            Err(crate::Error::Usage(format!(
-                "cut option {what} = {value} is outside its range {range}"
-            )))
+    pub fn validate(&self) -> Result<(), crate::OptionError> {
+        fn bad(
+            what: &str,
+            value: impl std::fmt::Display,
+            range: &str,
+        ) -> Result<(), crate::OptionError> {
+            Err(crate::OptionError::new("cut", what, value, range))
         }
         let w = self.curvature_weight;
         if !(w.is_finite() && (0.0..=1e6).contains(&w)) {

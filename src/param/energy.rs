@@ -7,11 +7,13 @@
 
 /// Which distortion the solver minimises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
 pub enum Energy {
     /// MIPS `tr(AᵀA)/det A = σ1/σ2 + σ2/σ1`: conformal (angle-preserving), scale-free.
     Mips,
     /// Symmetric Dirichlet `‖A‖² + ‖A⁻¹‖² = σ1² + σ1⁻² + σ2² + σ2⁻²`: isometric.
+    #[cfg_attr(feature = "cli", value(name = "sd"))]
     SymmetricDirichlet,
 }
 

@@ -22,12 +22,14 @@ pub use crate::gpu::BackendChoice;
 
 /// When `foldfree param` cuts the mesh into disk charts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum CutMode {
     /// Cut only meshes that are not a single disk (closed, higher genus, several holes, several
     /// components).
     #[default]
     Auto,
     /// Never cut: a mesh that is not a disk is an error.
+    #[cfg_attr(feature = "cli", value(name = "none"))]
     Never,
     /// Always go through the cutting and packing path, even for a disk (one chart, packed into
     /// the unit square).
@@ -115,10 +117,17 @@ pub struct ParamOutput {
     pub report: ParamReport,
 }
 
-/// Opens a Vulkan context for `job`, or None for the CPU backend.
+/// Opens a Vulkan context for `job`, or None for the CPU backend. Anderson acceleration exists
+/// on the CPU backend only: `Auto` means the CPU then.
 fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
+    let backend = match job.backend {
+        BackendChoice::Auto if job.admm.accel != crate::param::admm::Accel::None => {
+            BackendChoice::Cpu
+        }
+        b => b,
+    };
     Ok(crate::gpu::open_backend(
-        job.backend,
+        backend,
         job.device.as_deref(),
         job.validation,
     )?)
@@ -130,6 +139,12 @@ fn choose_backend(job: &ParamJob) -> Result<Option<crate::gpu::Context>> {
 /// every global-solver iteration.
 pub fn run_param(job: &ParamJob, progress: &mut dyn FnMut(Progress<'_>)) -> Result<ParamOutput> {
     let t0 = Instant::now();
+    if job.admm.accel != crate::param::admm::Accel::None && job.backend == BackendChoice::Vulkan {
+        return Err(Error::Usage(
+            "[admm] accel = \"anderson\" runs on the CPU backend only (use --backend cpu or auto)"
+                .into(),
+        ));
+    }
     job.admm.validate()?;
     job.cut_options.validate()?;
     job.pack.validate()?;

@@ -22,6 +22,7 @@ use crate::Result;
 
 /// Which solver runs after the start map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum SolverChoice {
     /// Output the start map as is.
     None,
@@ -374,7 +375,9 @@ fn run_admm(
     };
     match device {
         Some(_) if opts.accel != admm::Accel::None => Err(crate::Error::Usage(
-            "--accel anderson runs on the CPU backend only (use --backend cpu)".into(),
+            "ADMM's Anderson acceleration (accel = \"anderson\") runs on the CPU backend only \
+             (use --backend cpu)"
+                .into(),
         )),
         Some(device) => {
             let ctx = device.ctx;

@@ -54,11 +54,13 @@ impl Default for PackOptions {
 impl PackOptions {
     /// Checks the ranges (`resolution` 16..=16384, `padding` below a quarter of it, `max_pages`
     /// 1..=1000).
-    pub fn validate(&self) -> crate::Result<()> {
-        fn bad(what: &str, value: impl std::fmt::Display, range: &str) -> crate::Result<()> {
-            Err(crate::Error::Usage(format!(
-                "pack option {what} = {value} is outside its range {range}"
-            )))
+    pub fn validate(&self) -> Result<(), crate::OptionError> {
+        fn bad(
+            what: &str,
+            value: impl std::fmt::Display,
+            range: &str,
+        ) -> Result<(), crate::OptionError> {
+            Err(crate::OptionError::new("pack", what, value, range))
         }
         if !(1..=1000).contains(&self.max_pages) {
             return bad("max_pages", self.max_pages, "[1, 1000]");

@@ -136,13 +136,15 @@ impl LeastSquaresRecovery {
 }
 
 /// How per-vertex UVs are recovered from the per-face maps.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Recovery {
     /// [`LeastSquaresRecovery`]: the consensus error spread over the whole mesh.
     #[default]
+    #[serde(rename = "ls")]
     LeastSquares,
     /// [`breadth_first`], the seed paper's: exact where the maps agree, but the consensus error
     /// accumulates along the traversal, so it flips long after least squares is clean.
+    #[serde(rename = "bfs")]
     BreadthFirst,
 }
 

@@ -1,5 +1,5 @@
 //! Position-constraint files (`vertex_index x y z` per line, 0-based, `#` comments) and the
-//! twist generator behind `foldfree volmap-constraints`.
+//! twist generator behind `foldfree dev volmap-constraints`.
 
 use std::fmt::Write;
 use std::path::Path;

@@ -102,3 +102,10 @@ pub(crate) fn read_text(path: &std::path::Path, limit: u64) -> Result<String, Vo
         }
     })
 }
+
+/// An option outside its range is bad input (exit 2), with the option type's message.
+impl From<crate::OptionError> for VolError {
+    fn from(e: crate::OptionError) -> Self {
+        VolError::Input(e.to_string())
+    }
+}

@@ -341,3 +341,53 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     outputs.commit()?;
     Ok(report)
 }
+
+/// The summary `foldfree volmap` prints: the map's quality, then one line per phase (no
+/// trailing newline).
+impl std::fmt::Display for VolmapFileReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self;
+        let q = &r.written;
+        write!(
+            f,
+            "foldfree volmap: {} tets, inverted init {} → output {}; δ_t {:.4} ({}, {} pinned), max {:.3e}, ρ {:.3e}{}, {:.2} s",
+            q.tets,
+            r.run.inverted_init,
+            q.inverted,
+            q.delta_t,
+            // Every tet pinned: there is no free-tet mean to print (it is NaN, `null` in JSON).
+            if q.delta_t_free.is_finite() {
+                format!("free tets {:.4}", q.delta_t_free)
+            } else {
+                "no free tets".to_string()
+            },
+            q.pinned_tets,
+            q.max_distortion,
+            q.rho,
+            if r.run.snapped { " (snapped)" } else { "" },
+            r.run.seconds
+        )?;
+        if let Some(s) = &r.sphere_sliding {
+            write!(
+                f,
+                "\n  {:<20} {:>4} it {:>6} ε   {:>7.2} s  inverted {} → {} (boundary sliding on the sphere)",
+                "ball untangle", s.iterations, s.eps_updates, s.seconds, s.inverted_start, s.inverted_left
+            )?;
+            if let Some(d) = s.delta_t_before_relax {
+                write!(
+                    f,
+                    "\n  {:<20} {:>4} it {:>9} {:>7.2} s  δ_t {d:.4} before (boundary sliding on the sphere)",
+                    "ball relax", s.relax_iterations, "", s.relax_seconds
+                )?;
+            }
+        }
+        for p in &r.run.phases {
+            write!(
+                f,
+                "\n  {:<20} {:>4} it {:>6} cg  {:>7.2} s  E {:.6e}  ρ {:.3e}",
+                p.name, p.iterations, p.cg_iterations, p.seconds, p.energy, p.rho
+            )?;
+        }
+        Ok(())
+    }
+}

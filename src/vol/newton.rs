@@ -278,7 +278,8 @@ impl Pattern {
 }
 
 /// Stopping rules and solver choices.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct NewtonOptions {
     pub max_iters: usize,
     /// Stop when |ΔE| < tol·|E|.

@@ -19,8 +19,10 @@ use super::tet::{sub, TetMesh};
 use super::untangle::{untangle_sliding, UntangleOptions};
 use super::VolError;
 
-/// Parameters of the method (defaults: the paper's).
-#[derive(Clone, Copy, Debug)]
+/// Parameters of the method (defaults: the paper's). The `[volmap]` table of a tuning file
+/// ([`crate::tuning`]); an optional phase is a table, or `false` for none.
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct VolmapOptions {
     /// Weight ω of ‖J' − J‖² in the deformation energy.
     pub omega: f64,
@@ -42,6 +44,7 @@ pub struct VolmapOptions {
     /// penalty trade-off, not in the linear solves).
     pub penalty: NewtonOptions,
     /// Newton settings of the post-optimisation (None: skipped).
+    #[serde(with = "crate::tuning::phase")]
     pub post: Option<NewtonOptions>,
     /// Replace the deformation and penalty phases by the untangler of Garanzha et al. 2021
     /// started from the init with the constrained vertices on their targets (ρ = 0 by
@@ -49,6 +52,7 @@ pub struct VolmapOptions {
     /// On by default: it imposes the constraints instead of penalising them, so when it ends
     /// fold-free ρ = 0 by construction, where the penalty rounds trade ρ against distortion
     /// and can stall above θ (BENCHMARKS.md measures both); None runs the paper's pipeline only.
+    #[serde(with = "crate::tuning::phase")]
     pub untangle: Option<UntangleOptions>,
     /// `--target ball`: Newton on the distortion with the boundary sliding on the sphere,
     /// after the sliding untangler (None: skipped). Capped because the path is long: thin
@@ -56,11 +60,13 @@ pub struct VolmapOptions {
     /// step is fold-free and on the sphere, so stopping early costs distortion, never validity.
     /// The cap (150) is a time budget, not a derived value; it has been measured on the shared
     /// tet meshes only, not over the corpus' tet folder (BENCHMARKS.md).
+    #[serde(with = "crate::tuning::phase")]
     pub ball_relax: Option<NewtonOptions>,
     /// `--target ball`: Newton on the distortion of the boundary surface's spherical
     /// embedding before the interior is built (None: the Tutte/stereographic embedding as it
     /// is). See [`super::ball::relax_on_sphere`]: every step is fold-free, so the cap is a time
     /// budget.
+    #[serde(with = "crate::tuning::phase")]
     pub sphere_relax: Option<NewtonOptions>,
 }
 
@@ -97,11 +103,9 @@ impl VolmapOptions {
     /// for hosts too): weights and tolerances positive and finite, λ growth above 1 (else the
     /// penalty rounds never tighten), iteration caps at least 1 and at most 1e6 (a cap far
     /// beyond any converging run only turns a stall into a hang).
-    pub fn validate(&self) -> Result<(), VolError> {
+    pub fn validate(&self) -> Result<(), crate::OptionError> {
         let bad = |what: &str, value: String, range: &str| {
-            Err(VolError::Input(format!(
-                "volmap option {what} = {value} is outside its range {range}"
-            )))
+            Err(crate::OptionError::new("volmap", what, value, range))
         };
         let pos = |x: f64| x.is_finite() && x > 0.0;
         for (what, x) in [
@@ -144,19 +148,20 @@ impl VolmapOptions {
             }
             if !(pos(n.cg.tolerance) && n.cg.tolerance < 1.0) {
                 return bad(
-                    &format!("{what}.cg_tol"),
+                    &format!("{what}.cg.tolerance"),
                     n.cg.tolerance.to_string(),
                     "(0, 1)",
                 );
             }
         }
         if let Some(u) = &self.untangle {
-            if !(1..=1_000_000).contains(&u.max_outer) || !(1..=1_000_000).contains(&u.max_inner) {
-                return bad(
-                    "untangle iterations",
-                    format!("{} outer, {} inner", u.max_outer, u.max_inner),
-                    "[1, 1e6]",
-                );
+            for (what, n) in [
+                ("untangle.max_outer", u.max_outer),
+                ("untangle.max_inner", u.max_inner),
+            ] {
+                if !(1..=1_000_000).contains(&n) {
+                    return bad(what, n.to_string(), "[1, 1e6]");
+                }
             }
         }
         Ok(())

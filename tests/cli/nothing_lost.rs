@@ -71,6 +71,16 @@ fn refused(test: &str, files: &[&str], args: &[&str], code: i32, needle: &str) {
     assert_eq!(dir.entries(), expected, "files appeared or vanished");
 }
 
+/// A tuning file holding `text`, in a folder of its own (the run's folder then holds only the
+/// run's files); its path for `--tuning`. Keep the folder alive while the file is used.
+fn tuning_file(test: &str, text: &str) -> (TempDir, String) {
+    let dir = TempDir::new(&format!("{test}-tuning"));
+    let path = dir.join("t.toml");
+    fs::write(&path, text).expect("write the tuning file");
+    let path = path.to_str().expect("utf-8 path").to_string();
+    (dir, path)
+}
+
 /// `foldfree volmap REST --target ball` plus `extra`.
 fn ball<'a>(rest: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     let mut a = vec!["volmap", rest, "--target", "ball"];
@@ -202,6 +212,7 @@ fn volmap_constraints_output_naming_the_rest_is_refused() {
         "volc_in",
         &["cube_5tets.mesh"],
         &[
+            "dev",
             "volmap-constraints",
             "cube_5tets.mesh",
             "-o",
@@ -217,7 +228,13 @@ fn write_constraints_naming_the_constraints_input_is_refused() {
     let dir = scratch("wc_in", &["cube_5tets.mesh"]);
     run(
         &dir,
-        &["volmap-constraints", "cube_5tets.mesh", "-o", "c.txt"],
+        &[
+            "dev",
+            "volmap-constraints",
+            "cube_5tets.mesh",
+            "-o",
+            "c.txt",
+        ],
     )
     .expect(0, "wrote");
     let before = fs::read(dir.join("c.txt")).unwrap();
@@ -442,20 +459,51 @@ fn numeric_options_outside_their_range_are_usage_errors() {
         "ranges",
         &["camel_open.obj", "block.obj", "cube_5tets.mesh"],
     );
-    for (flag, value) in [
-        ("--newton-iters", "4294967295"),
-        ("--mu", "0"),
-        ("--mu", "NaN"),
-        ("--mu", "inf"),
-        ("--tol-primal", "NaN"),
-        ("--tol-dual", "2"),
-        ("--max-iters", "0"),
-    ] {
+    run(
+        &dir,
+        &[
+            "param",
+            "camel_open.obj",
+            "-o",
+            "o.obj",
+            "-q",
+            "--max-iters",
+            "0",
+        ],
+    )
+    .expect(2, "outside its range");
+    // The solver knobs are the tuning file's; a value outside its range names file:line, key.
+    for (i, (text, key)) in [
+        ("[admm]\nnewton_iters = 4294967295\n", "newton_iters"),
+        ("[admm]\nmu = 0.0\n", "mu = 0 is outside its range"),
+        ("[admm]\nmu = nan\n", "mu = NaN is outside its range"),
+        ("[admm]\nmu = inf\n", "mu = inf is outside its range"),
+        (
+            "[admm]\ntol_primal = nan\n",
+            "tol_primal = NaN is outside its range",
+        ),
+        (
+            "[admm]\ntol_dual = 2.0\n",
+            "tol_dual = 2 is outside its range",
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let (_t, tuning) = tuning_file(&format!("ranges{i}"), text);
         let r = run(
             &dir,
-            &["param", "camel_open.obj", "-o", "o.obj", "-q", flag, value],
+            &[
+                "param",
+                "camel_open.obj",
+                "-o",
+                "o.obj",
+                "-q",
+                "--tuning",
+                &tuning,
+            ],
         );
-        r.expect(2, "outside its range");
+        r.expect(2, key).expect(2, &format!("{tuning}:2:"));
     }
     run(
         &dir,
@@ -471,16 +519,18 @@ fn numeric_options_outside_their_range_are_usage_errors() {
         ],
     )
     .expect(2, "[0, 100]");
+    let (_t, tuning) = tuning_file("ranges-growth", "[volmap]\nlambda_growth = 1.0\n");
     run(
         &dir,
-        &ball("cube_5tets.mesh", &["-o", "o.mesh", "--lambda-growth", "1"]),
+        &ball("cube_5tets.mesh", &["-o", "o.mesh", "--tuning", &tuning]),
     )
     .expect(2, "lambda_growth");
+    let (_t, tuning) = tuning_file("ranges-cg", "[volmap.newton.cg]\ntolerance = nan\n");
     run(
         &dir,
-        &ball("cube_5tets.mesh", &["-o", "o.mesh", "--cg-tol", "NaN"]),
+        &ball("cube_5tets.mesh", &["-o", "o.mesh", "--tuning", &tuning]),
     )
-    .expect(2, "cg_tol");
+    .expect(2, "newton.cg.tolerance");
     assert!(!dir.join("o.obj").exists() && !dir.join("o.mesh").exists());
 }
 
@@ -544,6 +594,7 @@ fn constraints_the_map_cannot_meet_exit_3() {
     run(
         &dir,
         &[
+            "dev",
             "volmap-constraints",
             "cube_5tets.mesh",
             "-o",
@@ -737,7 +788,7 @@ fn a_missing_input_is_exit_2_for_every_command() {
         vec!["approx", "nope.obj", "-k", "4", "-o", "o.obj"],
         vec!["volmap", "nope.mesh", "--target", "ball", "-o", "o.mesh"],
         vec!["volcheck", "nope.mesh", "--rest", "nope.mesh"],
-        vec!["volmap-constraints", "nope.mesh", "-o", "c.txt"],
+        vec!["dev", "volmap-constraints", "nope.mesh", "-o", "c.txt"],
         vec!["render", "nope.obj", "-o", "o.png"],
     ] {
         let r = run(&dir, &args);
@@ -770,6 +821,7 @@ fn volmap_at_any_scale_gives_the_unit_scale_map_scaled() {
         run(
             &dir,
             &[
+                "dev",
                 "volmap-constraints",
                 "r.mesh",
                 "-o",
@@ -847,6 +899,8 @@ fn cut_and_pack_options_have_ranges_in_the_library() {
     assert!(p.validate().is_ok());
     p.padding = 10_000;
     assert!(p.validate().is_err());
+    // (A tuning file's integers are TOML's, at most 2^63 − 1.)
+    let (_t, tuning) = tuning_file("seams", "[cut]\nextra_seams = 9223372036854775807\n");
     refused(
         "seams",
         &["block.obj"],
@@ -856,37 +910,25 @@ fn cut_and_pack_options_have_ranges_in_the_library() {
             "-o",
             "o.obj",
             "-q",
-            "--extra-seams",
-            "18446744073709551615",
+            "--tuning",
+            &tuning,
         ],
         2,
-        "extra_seams = 18446744073709551615 is outside its range [0, 1000]",
+        "extra_seams = 9223372036854775807 is outside its range [0, 1000]",
     );
 }
 
 #[test]
 fn every_option_range_error_has_the_readme_shape() {
     let dir = scratch("shape", &["block.obj", "cube_5tets.mesh"]);
+    let (_c, curvature) = tuning_file("shape-curvature", "[cut]\nseam_curvature = nan\n");
+    let (_s, stretch) = tuning_file("shape-stretch", "[cut]\nstretch_limit = 0.5\n");
     for args in [
         vec!["param", "block.obj", "-o", "o.obj", "--padding", "1000"],
         vec!["param", "block.obj", "-o", "o.obj", "--resolution", "8"],
         vec!["param", "block.obj", "-o", "o.obj", "--max-pages", "0"],
-        vec![
-            "param",
-            "block.obj",
-            "-o",
-            "o.obj",
-            "--seam-curvature",
-            "NaN",
-        ],
-        vec![
-            "param",
-            "block.obj",
-            "-o",
-            "o.obj",
-            "--stretch-limit",
-            "0.5",
-        ],
+        vec!["param", "block.obj", "-o", "o.obj", "--tuning", &curvature],
+        vec!["param", "block.obj", "-o", "o.obj", "--tuning", &stretch],
         vec!["approx", "block.obj", "-o", "o.obj", "-k", "0"],
         vec![
             "approx",
@@ -899,6 +941,7 @@ fn every_option_range_error_has_the_readme_shape() {
             "NaN",
         ],
         vec![
+            "dev",
             "volmap-constraints",
             "cube_5tets.mesh",
             "-o",
@@ -907,6 +950,7 @@ fn every_option_range_error_has_the_readme_shape() {
             "inf",
         ],
         vec![
+            "dev",
             "volmap-constraints",
             "cube_5tets.mesh",
             "-o",
@@ -934,7 +978,11 @@ fn tet_meshes_at_1e308_and_1e_300_are_checked_at_unit_scale() {
         let dir = TempDir::new("tetscale");
         scaled_cube(&dir, s, "r.mesh");
         run(&dir, &["volcheck", "r.mesh", "--rest", "r.mesh"]).expect(0, "");
-        run(&dir, &["volmap-constraints", "r.mesh", "-o", "c.txt"]).expect(0, "wrote");
+        run(
+            &dir,
+            &["dev", "volmap-constraints", "r.mesh", "-o", "c.txt"],
+        )
+        .expect(0, "wrote");
         run(
             &dir,
             &[
@@ -1036,6 +1084,7 @@ fn bench_never_overwrites_an_input_and_a_failed_run_is_not_exit_0() {
     let dir = scratch("bench", &["camel_open.obj"]);
     fs::copy(data("camel_open.obj"), dir.join("camel_open-mips-cpu.obj")).unwrap();
     let args = [
+        "dev",
         "bench",
         "camel_open.obj",
         "camel_open-mips-cpu.obj",
@@ -1055,12 +1104,21 @@ fn bench_never_overwrites_an_input_and_a_failed_run_is_not_exit_0() {
     );
     run(
         &dir,
-        &["bench", "nope.obj", "--backend", "cpu", "--out-dir", "o"],
+        &[
+            "dev",
+            "bench",
+            "nope.obj",
+            "--backend",
+            "cpu",
+            "--out-dir",
+            "o",
+        ],
     )
     .expect(2, "nope.obj: cannot read");
     run(
         &dir,
         &[
+            "dev",
             "bench",
             "camel_open.obj",
             "--backend",

@@ -1,4 +1,4 @@
-//! Anderson acceleration of the CPU ADMM iteration (`--accel anderson`): it must reach a tighter
+//! Anderson acceleration of the CPU ADMM iteration (`[admm] accel = "anderson"` in a tuning file): it must reach a tighter
 //! consensus than plain ADMM in the same number of iterations, never cost more than plain ADMM
 //! plus the rejected steps, keep every returned map flip-free, and be refused on Vulkan.
 
@@ -133,16 +133,21 @@ fn anderson_starts_after_the_plain_iterations_asked_for() {
 #[test]
 fn anderson_on_vulkan_is_refused_with_a_usage_error() {
     let out = std::env::temp_dir().join(format!("foldfree_aa_{}.obj", std::process::id()));
+    let tuning = out.with_extension("toml");
+    std::fs::write(&tuning, "[admm]\naccel = \"anderson\"\n").expect("write tuning");
     let run = Command::new(env!("CARGO_BIN_EXE_foldfree"))
         .arg("param")
         .arg(data("two_triangles.obj"))
         .arg("-o")
         .arg(&out)
-        .args(["--backend", "vulkan", "--accel", "anderson", "-q"])
+        .arg("--tuning")
+        .arg(&tuning)
+        .args(["--backend", "vulkan", "-q"])
         .output()
         .expect("run foldfree");
     assert_eq!(run.status.code(), Some(2));
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(err.contains("--backend cpu"), "stderr: {err}");
     assert!(!out.exists());
+    let _ = std::fs::remove_file(&tuning);
 }

@@ -22,6 +22,13 @@ fn foldfree(args: &[&str]) -> (Option<i32>, String) {
 }
 
 /// Charts of an OBJ: faces joined when they share a `vt` index (seams split `vt`, not `v`).
+/// Writes `[cut] overlap_splits = n` to a tuning file in `dir`; its path, for `--tuning`.
+fn overlap_splits(dir: &TempDir, n: usize) -> String {
+    let path = dir.join("tuning.toml");
+    fs::write(&path, format!("[cut]\noverlap_splits = {n}\n")).expect("write tuning");
+    path.to_str().expect("utf-8 path").to_string()
+}
+
 fn charts(obj: &objcheck::Obj) -> Vec<Vec<usize>> {
     let mut parent: Vec<usize> = (0..obj.f_v.len()).collect();
     fn root(p: &mut [usize], mut x: usize) -> usize {
@@ -289,7 +296,7 @@ fn file_boundary_crossings(obj: &objcheck::Obj) -> usize {
 #[test]
 fn chart_overlapping_itself_is_split_until_injective() {
     // The global solver's single block chart folds its boundary over itself (5 crossings
-    // with --overlap-splits 0, in BENCHMARKS.md's sweep); by default such charts are split.
+    // with `[cut] overlap_splits = 0`, in BENCHMARKS.md's sweep); by default such charts are split.
     let dir = TempDir::new("atlas_split");
     let r = check_atlas(
         &data("block"),
@@ -310,8 +317,8 @@ fn chart_overlapping_itself_is_split_until_injective() {
             "global",
             "--energy",
             "sd",
-            "--overlap-splits",
-            "0",
+            "--tuning",
+            &overlap_splits(&dir0, 0),
         ],
         Some(1),
     );
@@ -324,13 +331,14 @@ fn chart_overlapping_itself_is_split_until_injective() {
 #[test]
 fn a_chart_still_overlapping_after_its_seams_is_cut_into_pieces() {
     let dir = TempDir::new("atlas_pieces");
+    let tuning = overlap_splits(&dir, 1);
     let args = [
         "--solver",
         "global",
         "--energy",
         "sd",
-        "--overlap-splits",
-        "1",
+        "--tuning",
+        tuning.as_str(),
     ];
     let r = check_atlas(&data("block"), &dir, &args, None);
     assert_eq!(r["boundary_self_intersections"], 0);
@@ -351,7 +359,7 @@ fn closed_genus0_bunny_becomes_one_disk() {
     let r = check_atlas(
         &data("bunny_npm"),
         &dir,
-        &["--max-iters", "200", "--overlap-splits", "0"],
+        &["--max-iters", "200", "--tuning", &overlap_splits(&dir, 0)],
         Some(1),
     );
     assert_eq!(r["atlas"]["genus"], 0);
@@ -369,8 +377,8 @@ fn genus3_block_becomes_one_disk() {
             "100",
             "--energy",
             "sd",
-            "--overlap-splits",
-            "0",
+            "--tuning",
+            &overlap_splits(&dir, 0),
         ],
         Some(1),
     );
@@ -415,8 +423,8 @@ fn several_components_are_packed_apart() {
             "none",
             "--padding",
             "4",
-            "--overlap-splits",
-            "0",
+            "--tuning",
+            &overlap_splits(&dir, 0),
         ],
         Some(3),
     );

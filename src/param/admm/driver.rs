@@ -18,7 +18,7 @@ pub enum Backend {
 }
 
 /// Acceleration of the ADMM fixed-point iteration.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Accel {
     /// Plain ADMM.
@@ -65,11 +65,15 @@ pub trait Executor {
 }
 
 /// Solver settings. `Default` gives the documented defaults for MIPS; use
-/// [`AdmmOptions::for_energy`].
-#[derive(Clone, Debug)]
+/// [`AdmmOptions::for_energy`]. The `[admm]` table of a tuning file ([`crate::tuning`]): every
+/// field but `energy` (the job's) and `stop` (the host's), `mu_rel` spelt `mu`.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct AdmmOptions {
+    #[serde(skip)]
     pub energy: Energy,
     /// Penalty as `μ · #faces`; `None` picks the energy's default.
+    #[serde(rename = "mu", skip_serializing_if = "Option::is_none")]
     pub mu_rel: Option<f64>,
     pub max_iters: usize,
     /// Iterations per batch between residual read-backs.
@@ -97,11 +101,13 @@ pub struct AdmmOptions {
     /// Checks without a new low (< 0.95× the best) of the primal residual before μ is raised
     /// (and, with μ at its cap, before the run counts as stalled); `None`: the energy's
     /// default ([`AdmmOptions::stall_checks`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub stall_checks: Option<usize>,
     /// Bound of the μ raises: μ stays at or below initial μ × this factor.
     pub mu_growth_max: f64,
     /// Bound of residual balancing: μ stays at or above initial μ ÷ this factor; `None`: the
     /// energy's default ([`AdmmOptions::mu_shrink_max`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub mu_shrink_max: Option<f64>,
     /// Halve μ when the consensus is tight (primal residual under `balance_primal ×
     /// tol_primal`) but the maps still move (dual residual or energy change over tolerance), at
@@ -111,6 +117,7 @@ pub struct AdmmOptions {
     /// consensus, well above the f32 rounding floor of the residual on devices).
     pub balance_primal: f64,
     /// Set to stop early (Ctrl-C); the best flip-free map so far is returned.
+    #[serde(skip)]
     pub stop: Option<Arc<AtomicBool>>,
     /// Acceleration (every iteration counts, rejected accelerated ones included).
     pub accel: Accel,
@@ -122,6 +129,7 @@ pub struct AdmmOptions {
     /// LSCM: 75–275 iterations) pay nothing for it, and the history then starts near the
     /// slowly converging regime it is meant for. `None`: the energy's default
     /// ([`AdmmOptions::aa_start`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub aa_start: Option<usize>,
     /// While accelerating, residual balancing (lowering μ) also waits for the relative energy
     /// change between checks to fall under this (∞: no extra condition).
@@ -171,11 +179,13 @@ impl AdmmOptions {
     /// (exit 2 in the CLI) as the command line: tolerances are relative, so they lie in (0, 1);
     /// counts are at least 1 and bounded where a larger value can only run for ever (one face's
     /// Newton solve converges quadratically: more than 100 steps per iteration cannot help).
-    pub fn validate(&self) -> crate::Result<()> {
-        fn bad(what: &str, value: impl std::fmt::Display, range: &str) -> crate::Result<()> {
-            Err(crate::Error::Usage(format!(
-                "ADMM option {what} = {value} is outside its range {range}"
-            )))
+    pub fn validate(&self) -> Result<(), crate::OptionError> {
+        fn bad(
+            what: &str,
+            value: impl std::fmt::Display,
+            range: &str,
+        ) -> Result<(), crate::OptionError> {
+            Err(crate::OptionError::new("ADMM", what, value, range))
         }
         let rel = |x: f64| x.is_finite() && x > 0.0 && x < 1.0;
         if let Some(mu) = self.mu_rel {

@@ -32,7 +32,8 @@ use super::tet::{to_unit_sphere, TetMesh};
 use super::VolError;
 
 /// Settings of the untangling stage.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct UntangleOptions {
     /// Weight θ of the volume term (the rest is the shape term).
     pub theta: f64,
