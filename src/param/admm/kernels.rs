@@ -1,7 +1,12 @@
 //! The CPU f64 twins of the ADMM shaders, one function per kernel, written per element so the
 //! GLSL in `glsl/admm/` can be read side by side with them. The CPU backend ([`super::cpu`])
 //! maps them over all faces / edges / slots; the tests compare each shader against its twin.
+//!
+//! The 2×2 signed SVD and the half-angle step the shaders mirror are the crate's single copies
+//! in [`crate::linalg::small`] (written trigonometry-free there because `glsl/common/admm.glsl`
+//! is); they are re-exported here so a kernel reads beside its shader.
 
+pub use crate::linalg::small::{half_angle, svd2};
 use crate::param::energy::{self, Energy};
 
 /// Maximum step halvings in the face line search.
@@ -13,47 +18,6 @@ pub const ARMIJO: f64 = 1e-4;
 /// Fraction of the largest flip-free step taken at most (the determinant root itself is not a
 /// valid step: it makes the face degenerate).
 pub const FLIP_FREE_FRACTION: f64 = 0.9;
-
-/// `(cos x, sin x)` of half the angle whose cosine and sine are `(c, s)` (unit vector), taking
-/// the half angle in (−π/2, π/2]; each branch divides by the larger of the two results.
-pub fn half_angle(c: f64, s: f64) -> [f64; 2] {
-    if c >= 0.0 {
-        let ch = (0.5 * (1.0 + c)).sqrt();
-        [ch, s / (2.0 * ch)]
-    } else {
-        let sh = (0.5 * (1.0 - c)).sqrt();
-        // s/(2 sh) is cos(x/2); its sign follows s, so flip both to keep cos ≥ 0.
-        let ch = s / (2.0 * sh);
-        if ch >= 0.0 {
-            [ch, sh]
-        } else {
-            [-ch, -sh]
-        }
-    }
-}
-
-/// Signed SVD of a 2x2 `A = U diag(σ1, σ2) Vᵀ` with rotations `U = rot(φ)`, `Vᵀ = rot(θ)`,
-/// σ1 ≥ |σ2| (σ2 < 0 iff det A < 0). Returned as `(cos φ, sin φ, σ1, σ2, cos θ, sin θ)`.
-///
-/// With E, F, G, H the conformal / anti-conformal parts, `a1 = ∠(F, G)`, `a2 = ∠(E, H)`:
-/// `φ = (a1 + a2)/2`, `θ = φ − a1`. Computed without trigonometric calls (half-angle of the
-/// sum, then a rotation), which were 30% of the face step; the GLSL twin does the same.
-pub fn svd2(a: &[f64; 4]) -> [f64; 6] {
-    let e = 0.5 * (a[0] + a[3]);
-    let f = 0.5 * (a[0] - a[3]);
-    let g = 0.5 * (a[2] + a[1]);
-    let h = 0.5 * (a[2] - a[1]);
-    let q = (e * e + h * h).sqrt();
-    let r = (f * f + g * g).sqrt();
-    // Unit vectors of a1 and a2; an arbitrary angle (0) where the part vanishes.
-    let (c1, s1) = if r > 0.0 { (f / r, g / r) } else { (1.0, 0.0) };
-    let (c2, s2) = if q > 0.0 { (e / q, h / q) } else { (1.0, 0.0) };
-    let [cp, sp] = half_angle(c1 * c2 - s1 * s2, s1 * c2 + c1 * s2);
-    // θ = φ − a1.
-    let ct = cp * c1 + sp * s1;
-    let st = sp * c1 - cp * s1;
-    [cp, sp, q + r, q - r, ct, st]
-}
 
 /// `U X Vᵀ` for `U = rot(φ)`, `Vᵀ = rot(θ)` given as cos/sin pairs; row-major.
 fn rotate(u: [f64; 2], x: [f64; 4], vt: [f64; 2]) -> [f64; 4] {

@@ -1,0 +1,244 @@
+//! The crate's compressed sparse row matrix for the iterative solvers and their
+//! preconditioners (storage as in Saad, *Iterative Methods for Sparse Linear Systems*, 2nd ed.
+//! 2003, §3.4; products by rows with a dense accumulator, Gustavson 1978).
+//!
+//! Why it exists next to `sprs`: callers assemble and hand over `sprs::CsMat` (the public API
+//! of every solve), but the factorisations, the multigrid hierarchy and the Krylov loops want
+//! one owned, checked (square, finite, sorted rows) layout with plain `usize` index slices and
+//! a row-parallel SpMV whose result does not depend on the thread count. [`Csr::from_sprs`] is
+//! the one conversion; nothing else in the crate defines a CSR type.
+#![forbid(unsafe_code)]
+
+use rayon::prelude::*;
+use sprs::CsMat;
+
+use super::{norm, SolveError};
+
+/// Matrices with at least this many rows get a rayon-parallel sparse matrix–vector product.
+pub const PARALLEL_ROWS: usize = 20_000;
+
+/// An owned CSR matrix (rows × cols) with sorted column indices in each row.
+pub(crate) struct Csr {
+    pub(crate) rows: usize,
+    pub(crate) cols: usize,
+    pub(crate) indptr: Vec<usize>,
+    pub(crate) indices: Vec<usize>,
+    pub(crate) data: Vec<f64>,
+}
+
+impl Csr {
+    /// Copies a square `sprs` CSR matrix, checking its entries are finite.
+    pub(crate) fn from_sprs(a: &CsMat<f64>) -> Result<Csr, SolveError> {
+        if !a.is_csr() {
+            return Err(SolveError::InvalidInput {
+                what: "Krylov solvers take a CSR matrix (got CSC)".into(),
+            });
+        }
+        if a.rows() != a.cols() {
+            return Err(SolveError::InvalidInput {
+                what: format!("matrix is {}x{}, not square", a.rows(), a.cols()),
+            });
+        }
+        if let Some(i) = a.data().iter().position(|v| !v.is_finite()) {
+            return Err(SolveError::NonFinite {
+                what: format!("matrix entry {i}"),
+            });
+        }
+        let indptr = a.indptr().to_proper().into_owned();
+        Ok(Csr {
+            rows: a.rows(),
+            cols: a.cols(),
+            indptr,
+            indices: a.indices().to_vec(),
+            data: a.data().to_vec(),
+        })
+    }
+
+    #[inline]
+    pub(crate) fn row(&self, i: usize) -> (&[usize], &[f64]) {
+        let (s, e) = (self.indptr[i], self.indptr[i + 1]);
+        (&self.indices[s..e], &self.data[s..e])
+    }
+
+    #[inline]
+    pub(crate) fn row_dot(&self, i: usize, x: &[f64]) -> f64 {
+        let (cols, vals) = self.row(i);
+        cols.iter().zip(vals).map(|(&j, &v)| v * x[j]).sum()
+    }
+
+    /// y = A·x, parallel over rows when the matrix is large.
+    pub(crate) fn spmv(&self, x: &[f64], y: &mut [f64]) {
+        if self.rows >= PARALLEL_ROWS {
+            y.par_iter_mut()
+                .enumerate()
+                .with_min_len(4096)
+                .for_each(|(i, yi)| *yi = self.row_dot(i, x));
+        } else {
+            for (i, yi) in y.iter_mut().enumerate() {
+                *yi = self.row_dot(i, x);
+            }
+        }
+    }
+
+    /// Position of the diagonal entry of each row, `None` if one is missing.
+    pub(crate) fn diagonal_positions(&self) -> Option<Vec<usize>> {
+        (0..self.rows)
+            .map(|i| {
+                self.row(i)
+                    .0
+                    .binary_search(&i)
+                    .ok()
+                    .map(|p| p + self.indptr[i])
+            })
+            .collect()
+    }
+
+    pub(crate) fn diagonal(&self) -> Vec<f64> {
+        (0..self.rows)
+            .map(|i| {
+                self.row(i)
+                    .0
+                    .binary_search(&i)
+                    .map_or(0.0, |p| self.data[self.indptr[i] + p])
+            })
+            .collect()
+    }
+
+    /// Aᵀ (count → prefix sum → fill; rows come out sorted).
+    pub(crate) fn transpose(&self) -> Csr {
+        let mut indptr = vec![0usize; self.cols + 1];
+        for &j in &self.indices {
+            indptr[j + 1] += 1;
+        }
+        for j in 0..self.cols {
+            indptr[j + 1] += indptr[j];
+        }
+        let mut fill = indptr.clone();
+        let mut indices = vec![0usize; self.indices.len()];
+        let mut data = vec![0.0; self.data.len()];
+        for i in 0..self.rows {
+            let (cols, vals) = self.row(i);
+            for (&j, &v) in cols.iter().zip(vals) {
+                indices[fill[j]] = i;
+                data[fill[j]] = v;
+                fill[j] += 1;
+            }
+        }
+        Csr {
+            rows: self.cols,
+            cols: self.rows,
+            indptr,
+            indices,
+            data,
+        }
+    }
+
+    /// A·B by rows with a dense accumulator (Gustavson 1978); rows come out sorted.
+    pub(crate) fn mul(&self, b: &Csr) -> Csr {
+        let mut out = RowBuilder::new(self.rows, b.cols);
+        for i in 0..self.rows {
+            let (ac, av) = self.row(i);
+            for (&k, &a_ik) in ac.iter().zip(av) {
+                let (bc, bv) = b.row(k);
+                for (&j, &b_kj) in bc.iter().zip(bv) {
+                    out.add(j, a_ik * b_kj);
+                }
+            }
+            out.finish_row();
+        }
+        out.build()
+    }
+}
+
+/// Assembles a CSR matrix row by row, summing duplicate columns with a dense accumulator.
+pub(crate) struct RowBuilder {
+    rows: usize,
+    cols: usize,
+    indptr: Vec<usize>,
+    indices: Vec<usize>,
+    data: Vec<f64>,
+    acc: Vec<f64>,
+    mark: Vec<bool>,
+    here: Vec<usize>,
+}
+
+impl RowBuilder {
+    pub(crate) fn new(rows: usize, cols: usize) -> RowBuilder {
+        RowBuilder {
+            rows,
+            cols,
+            indptr: vec![0],
+            indices: Vec::new(),
+            data: Vec::new(),
+            acc: vec![0.0; cols],
+            mark: vec![false; cols],
+            here: Vec::new(),
+        }
+    }
+
+    #[inline]
+    pub(crate) fn add(&mut self, j: usize, v: f64) {
+        if !self.mark[j] {
+            self.mark[j] = true;
+            self.acc[j] = 0.0;
+            self.here.push(j);
+        }
+        self.acc[j] += v;
+    }
+
+    pub(crate) fn finish_row(&mut self) {
+        self.here.sort_unstable();
+        for &j in &self.here {
+            self.indices.push(j);
+            self.data.push(self.acc[j]);
+            self.mark[j] = false;
+        }
+        self.here.clear();
+        self.indptr.push(self.indices.len());
+    }
+
+    pub(crate) fn build(self) -> Csr {
+        debug_assert_eq!(self.indptr.len(), self.rows + 1);
+        Csr {
+            rows: self.rows,
+            cols: self.cols,
+            indptr: self.indptr,
+            indices: self.indices,
+            data: self.data,
+        }
+    }
+}
+
+#[inline]
+/// r = b − A·x, returns ‖r‖.
+pub(crate) fn residual(a: &Csr, b: &[f64], x: &[f64], r: &mut [f64]) -> f64 {
+    a.spmv(x, r);
+    for (ri, bi) in r.iter_mut().zip(b) {
+        *ri = bi - *ri;
+    }
+    norm(r)
+}
+
+pub(crate) fn check_vectors(a: &Csr, b: &[f64], x: &[f64]) -> Result<(), SolveError> {
+    if b.len() != a.rows || x.len() != a.rows {
+        return Err(SolveError::InvalidInput {
+            what: format!(
+                "matrix has {} rows but b has {} and x has {} entries",
+                a.rows,
+                b.len(),
+                x.len()
+            ),
+        });
+    }
+    if let Some(i) = b.iter().position(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite {
+            what: format!("right-hand side at row {i}"),
+        });
+    }
+    if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite {
+            what: format!("initial guess at row {i}"),
+        });
+    }
+    Ok(())
+}
