@@ -11,6 +11,7 @@
 #![forbid(unsafe_code)]
 
 use crate::linalg::lbfgs::{minimise, next_eps, LbfgsOptions, Objective};
+use crate::param::energy::det;
 
 /// Parameters of [`untangle_2d`].
 #[derive(Clone, Debug, PartialEq)]
@@ -98,13 +99,9 @@ fn jacobian(q: &[[f64; 2]; 3], r: &Reference) -> [f64; 4] {
     ]
 }
 
-fn det2(j: &[f64; 4]) -> f64 {
-    j[0] * j[3] - j[1] * j[2]
-}
-
 /// Jacobian determinant of the triangle `q` against its reference (≤ 0: inverted).
 pub(crate) fn triangle_det(q: &[[f64; 2]; 3], r: &Reference) -> f64 {
-    det2(&jacobian(q, r))
+    det(&jacobian(q, r))
 }
 
 /// Regularised energy of one triangle with corners `q` (see module doc) and, with `grad`, its
@@ -117,7 +114,7 @@ pub(crate) fn triangle_energy(
     grad: Option<&mut [[f64; 2]; 3]>,
 ) -> f64 {
     let j = jacobian(q, r);
-    let d = det2(&j);
+    let d = det(&j);
     let c = chi(d, eps);
     let fro = j.iter().map(|v| v * v).sum::<f64>();
     let a = (1.0 - theta) * 0.5 * fro + theta * 0.5 * (d * d + 1.0);
@@ -246,21 +243,15 @@ impl Objective for AtEps<'_> {
     }
 }
 
-/// L-BFGS (memory 8) of one round; returns the final energy.
-fn lbfgs(p: &dyn Barrier, x: &mut [f64], eps: f64, iterations: usize) -> f64 {
-    let opts = LbfgsOptions {
-        memory: 8,
-        max_iterations: iterations,
-        gradient_tolerance: Some(1e-12),
-        rel_decrease: 1e-14,
-        curvature_rel: 0.0,
-        curvature_abs: 1e-300,
-    };
-    match minimise(&mut AtEps { p, eps }, x, &opts) {
-        Ok(r) => r.energy,
-        Err(never) => match never {},
-    }
-}
+/// L-BFGS settings of a round (memory 8, the iteration cap is the options').
+const LBFGS: LbfgsOptions = LbfgsOptions {
+    memory: 8,
+    max_iterations: 0,
+    gradient_tolerance: Some(1e-12),
+    rel_decrease: 1e-14,
+    curvature_rel: 0.0,
+    curvature_abs: 1e-300,
+};
 
 /// Moves the `free` vertices of `x` to untangle the triangles `faces` (local vertex indices)
 /// against their `refs` (see module doc). Fixed vertices are not touched. Stops as soon as no
@@ -303,7 +294,12 @@ pub(crate) fn minimise_rounds(
     let mut since_best = 0;
     while rounds < opts.max_rounds && since_best < opts.stall_rounds {
         rounds += 1;
-        let e = lbfgs(p, x, eps, opts.iterations);
+        let lbfgs = LbfgsOptions {
+            max_iterations: opts.iterations,
+            ..LBFGS
+        };
+        let r = minimise(&mut AtEps { p, eps }, x, &lbfgs).unwrap_or_else(|never| match never {});
+        let e = r.energy;
         (min_det, inverted) = p.min_det(x);
         if inverted < best.0 {
             best = (inverted, x.to_vec());

@@ -29,11 +29,6 @@ pub mod cg {
     pub use super::sparse::PARALLEL_ROWS;
 }
 
-pub use krylov::{
-    bicgstab, bicgstab_multi, pcg, pcg_multi, CgOptions, CgStats, KrylovMethod, KrylovSolver,
-};
-pub use precond::Preconditioner;
-
 use rayon::prelude::*;
 
 /// Σ a_i·b_i over the common length, summed in order (the solvers' and energies' one slice

@@ -23,8 +23,13 @@ impl SplitMix {
         (self.next_u64() % n.max(1) as u64) as usize
     }
 
-    /// Uniform in [−1, 1) with 53 random bits.
+    /// Uniform in [0, 1) with 53 random bits.
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in [−1, 1).
     pub fn symmetric(&mut self) -> f64 {
-        ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        self.unit() * 2.0 - 1.0
     }
 }

@@ -44,13 +44,6 @@ pub fn mul2(a: &Mat2, b: &Mat2) -> Mat2 {
     ]
 }
 
-/// The rotation matrix by angle `t` (counter-clockwise).
-#[inline]
-pub fn rot2(t: f64) -> Mat2 {
-    let (s, c) = t.sin_cos();
-    [[c, -s], [s, c]]
-}
-
 /// Similarity / anti-similarity split of a 2x2 matrix `[[a, b], [c, d]]`:
 /// E = (a+d)/2, F = (a−d)/2, G = (c+b)/2, H = (c−b)/2, so that
 /// M = [[E, −H], [H, E]] + [[F, G], [G, −F]] (conformal part + anti-conformal part).

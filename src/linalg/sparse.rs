@@ -80,27 +80,21 @@ impl Csr {
         }
     }
 
-    /// Position of the diagonal entry of each row, `None` if one is missing.
-    pub(crate) fn diagonal_positions(&self) -> Option<Vec<usize>> {
-        (0..self.rows)
-            .map(|i| {
-                self.row(i)
-                    .0
-                    .binary_search(&i)
-                    .ok()
-                    .map(|p| p + self.indptr[i])
-            })
-            .collect()
+    /// Position of row i's diagonal entry in the value array, `None` if it is missing.
+    fn diagonal_position(&self, i: usize) -> Option<usize> {
+        let p = self.row(i).0.binary_search(&i).ok()?;
+        Some(p + self.indptr[i])
     }
 
+    /// Position of the diagonal entry of each row, `None` if one is missing.
+    pub(crate) fn diagonal_positions(&self) -> Option<Vec<usize>> {
+        (0..self.rows).map(|i| self.diagonal_position(i)).collect()
+    }
+
+    /// The diagonal (0 where an entry is missing).
     pub(crate) fn diagonal(&self) -> Vec<f64> {
         (0..self.rows)
-            .map(|i| {
-                self.row(i)
-                    .0
-                    .binary_search(&i)
-                    .map_or(0.0, |p| self.data[self.indptr[i] + p])
-            })
+            .map(|i| self.diagonal_position(i).map_or(0.0, |p| self.data[p]))
             .collect()
     }
 

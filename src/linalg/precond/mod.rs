@@ -7,7 +7,7 @@
 //! (non-positive pivot) on matrices that are not M-matrices (cotangent weights of obtuse
 //! triangles, LSCM): we retry with a diagonal shift A + α·diag(A) (Manteuffel 1980), then fall
 //! back to Jacobi, so asking for a stronger preconditioner never makes a solve fail;
-//! [`super::CgStats::preconditioner`] says what was used.
+//! [`super::krylov::CgStats::preconditioner`] says what was used.
 #![forbid(unsafe_code)]
 
 mod amg;

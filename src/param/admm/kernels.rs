@@ -276,55 +276,6 @@ pub fn dual_update(lambda: &[f64; 4], y: &[f64; 4], a: &[f64; 4], mu: f64) -> [f
 mod tests {
     use super::*;
 
-    /// Fixed number of cyclic Jacobi sweeps for the 4x4 eigenproblem (the GLSL twin uses the same
-    /// count; 6 sweeps take a symmetric 4x4 to machine precision in practice).
-    const JACOBI_SWEEPS: usize = 6;
-
-    /// Eigen-decomposition of a symmetric 4x4 matrix by cyclic Jacobi rotations.
-    /// Returns eigenvalues and eigenvectors as the columns of `v` (`v[row][col]`).
-    fn jacobi_eigen4(h: &[[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
-        let mut a = *h;
-        let mut v = [[0.0; 4]; 4];
-        for i in 0..4 {
-            v[i][i] = 1.0;
-        }
-        for _ in 0..JACOBI_SWEEPS {
-            for p in 0..3 {
-                for q in (p + 1)..4 {
-                    let apq = a[p][q];
-                    if apq == 0.0 {
-                        continue;
-                    }
-                    // Rotation angle that zeroes a[p][q]: tan 2θ = 2 a_pq / (a_qq − a_pp).
-                    let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
-                    let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                    let t = if theta == 0.0 { 1.0 } else { t };
-                    let c = 1.0 / (t * t + 1.0).sqrt();
-                    let s = t * c;
-                    for k in 0..4 {
-                        let akp = a[k][p];
-                        let akq = a[k][q];
-                        a[k][p] = c * akp - s * akq;
-                        a[k][q] = s * akp + c * akq;
-                    }
-                    for k in 0..4 {
-                        let apk = a[p][k];
-                        let aqk = a[q][k];
-                        a[p][k] = c * apk - s * aqk;
-                        a[q][k] = s * apk + c * aqk;
-                    }
-                    for k in 0..4 {
-                        let vkp = v[k][p];
-                        let vkq = v[k][q];
-                        v[k][p] = c * vkp - s * vkq;
-                        v[k][q] = s * vkp + c * vkq;
-                    }
-                }
-            }
-        }
-        ([a[0][0], a[1][1], a[2][2], a[3][3]], v)
-    }
-
     #[test]
     fn analytic_eigensystem_matches_jacobi_on_the_hessian() {
         for energy in [Energy::Mips, Energy::SymmetricDirichlet] {
@@ -346,7 +297,7 @@ mod tests {
                         );
                     }
                 }
-                let (mut jl, _) = jacobi_eigen4(&h);
+                let (mut jl, _) = crate::linalg::small::sym_eigen(&h);
                 let mut al = lam;
                 jl.sort_by(f64::total_cmp);
                 al.sort_by(f64::total_cmp);
@@ -393,23 +344,6 @@ mod tests {
                 assert!((r[i] - a[i]).abs() < 1e-12);
             }
             assert!(s1 >= s2.abs());
-        }
-    }
-
-    #[test]
-    fn jacobi_diagonalises() {
-        let h = [
-            [4.0, 1.0, -2.0, 0.5],
-            [1.0, 3.0, 0.0, 1.0],
-            [-2.0, 0.0, -1.0, 0.3],
-            [0.5, 1.0, 0.3, 2.0],
-        ];
-        let (lam, v) = jacobi_eigen4(&h);
-        for k in 0..4 {
-            for i in 0..4 {
-                let hv: f64 = (0..4).map(|j| h[i][j] * v[j][k]).sum();
-                assert!((hv - lam[k] * v[i][k]).abs() < 1e-10, "H v = λ v fails");
-            }
         }
     }
 

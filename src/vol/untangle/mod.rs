@@ -174,28 +174,7 @@ struct Scratch {
     device: Option<DeviceTets>,
 }
 
-impl<'a> Problem<'a> {
-    fn new(
-        tets: &'a [[u32; 4]],
-        d: Vec<Corner>,
-        w: Vec<f64>,
-        fixed: &'a [bool],
-        theta: f64,
-        protect: &'a [bool],
-    ) -> Self {
-        let (start, inc) = crate::mesh::topology::corner_incidence(fixed.len(), tets);
-        Problem {
-            tets,
-            d,
-            w,
-            fixed,
-            theta,
-            protect,
-            start,
-            inc,
-        }
-    }
-
+impl Problem<'_> {
     fn dets(&self, x: &[[f64; 3]]) -> Vec<f64> {
         (0..self.tets.len())
             .into_par_iter()
@@ -479,14 +458,17 @@ pub fn untangle_protected(
             .map(|(t, &p)| p && super::tet::is_positive(super::tet::det6(x, t)))
             .collect()
     };
-    let prob = Problem::new(
+    let (first, inc) = crate::mesh::topology::corner_incidence(nv, tets);
+    let prob = Problem {
         tets,
         d,
-        vol.iter().map(|v| v / total).collect(),
+        w: vol.iter().map(|v| v / total).collect(),
         fixed,
-        opts.theta,
-        &protect,
-    );
+        theta: opts.theta,
+        protect: &protect,
+        start: first,
+        inc,
+    };
     let mut sc = Scratch {
         device: match device {
             Some(ctx) => Some(DeviceTets::new(ctx, prob.tets, &prob.d, &prob.w, nv)?),
