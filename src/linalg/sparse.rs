@@ -5,7 +5,7 @@
 //! Why it exists next to `sprs`: callers assemble and hand over `sprs::CsMat` (the public API
 //! of every solve), but the factorisations, the multigrid hierarchy and the Krylov loops want
 //! one owned, checked (square, finite, sorted rows) layout with plain `usize` index slices and
-//! a row-parallel SpMV whose result does not depend on the thread count. [`Csr::from_sprs`] is
+//! a row-parallel SpMV whose result does not depend on the thread count. `Csr::from_sprs` is
 //! the one conversion; nothing else in the crate defines a CSR type.
 #![forbid(unsafe_code)]
 
