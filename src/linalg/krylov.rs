@@ -24,7 +24,7 @@ use rayon::prelude::*;
 use sprs::CsMat;
 
 use super::precond::{build_precond, Precond, Preconditioner};
-use super::sparse::{check_vectors, residual, Csr};
+use super::sparse::{check_vectors, from_sprs, residual, Csr, CsrOps};
 use super::{dot, norm, SolveError};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,7 +95,7 @@ impl KrylovSolver {
         opts: &CgOptions,
         method: KrylovMethod,
     ) -> Result<KrylovSolver, SolveError> {
-        let a = Csr::from_sprs(a)?;
+        let a = from_sprs(a)?;
         let spd = method == KrylovMethod::Cg;
         let (pre, kind, shift) = build_precond(&a, opts.preconditioner, spd)?;
         Ok(KrylovSolver {
@@ -110,7 +110,7 @@ impl KrylovSolver {
 
     /// Number of rows (= unknowns).
     pub fn rows(&self) -> usize {
-        self.a.rows
+        self.a.rows()
     }
 
     /// The preconditioner actually built (after any fallback) and its diagonal shift.
@@ -216,7 +216,7 @@ fn pcg_iterate(
     x: &mut [f64],
     opts: &CgOptions,
 ) -> Result<(usize, f64), SolveError> {
-    let n = a.rows;
+    let n = a.rows();
     let bnorm = norm(b);
     if bnorm == 0.0 {
         x.fill(0.0);
@@ -305,7 +305,7 @@ fn bicgstab_iterate(
     x: &mut [f64],
     opts: &CgOptions,
 ) -> Result<(usize, f64), SolveError> {
-    let n = a.rows;
+    let n = a.rows();
     let bnorm = norm(b);
     if bnorm == 0.0 {
         x.fill(0.0);

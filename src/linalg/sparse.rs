@@ -1,12 +1,12 @@
-//! The crate's compressed sparse row matrix for the iterative solvers and their
-//! preconditioners (storage as in Saad, *Iterative Methods for Sparse Linear Systems*, 2nd ed.
-//! 2003, §3.4; products by rows with a dense accumulator, Gustavson 1978).
+//! Compressed sparse row matrices of the iterative solvers and their preconditioners
+//! (storage as in Saad, *Iterative Methods for Sparse Linear Systems*, 2nd ed. 2003, §3.4;
+//! products by rows with a dense accumulator, Gustavson 1978).
 //!
-//! Why it exists next to `sprs`: callers assemble and hand over `sprs::CsMat` (the public API
-//! of every solve), but the factorisations, the multigrid hierarchy and the Krylov loops want
-//! one owned, checked (square, finite, sorted rows) layout with plain `usize` index slices and
-//! a row-parallel SpMV whose result does not depend on the thread count. `Csr::from_sprs` is
-//! the one conversion; nothing else in the crate defines a CSR type.
+//! The matrix type is `sprs::CsMat<f64>`, the one CSR type of the crate: callers assemble
+//! into it, and the solvers copy it once (checked square and finite, with a proper index
+//! pointer). This module adds what the factorisations, the multigrid hierarchy and the Krylov
+//! loops need on top of it: plain row slices, a row-parallel SpMV whose result does not
+//! depend on the thread count, and a row-by-row builder.
 #![forbid(unsafe_code)]
 
 use rayon::prelude::*;
@@ -17,58 +17,80 @@ use super::{norm, SolveError};
 /// Matrices with at least this many rows get a rayon-parallel sparse matrix–vector product.
 pub const PARALLEL_ROWS: usize = 20_000;
 
-/// An owned CSR matrix (rows × cols) with sorted column indices in each row.
-pub(crate) struct Csr {
-    pub(crate) rows: usize,
-    pub(crate) cols: usize,
-    pub(crate) indptr: Vec<usize>,
-    pub(crate) indices: Vec<usize>,
-    pub(crate) data: Vec<f64>,
+/// The solvers' CSR matrix: `sprs`'s, owned, with a proper index pointer (starting at 0) and
+/// sorted column indices in each row.
+pub(crate) type Csr = CsMat<f64>;
+
+/// Copies a square `sprs` CSR matrix, checking its entries are finite.
+pub(crate) fn from_sprs(a: &CsMat<f64>) -> Result<Csr, SolveError> {
+    if !a.is_csr() {
+        return Err(SolveError::InvalidInput {
+            what: "Krylov solvers take a CSR matrix (got CSC)".into(),
+        });
+    }
+    if a.rows() != a.cols() {
+        return Err(SolveError::InvalidInput {
+            what: format!("matrix is {}x{}, not square", a.rows(), a.cols()),
+        });
+    }
+    if let Some(i) = a.data().iter().position(|v| !v.is_finite()) {
+        return Err(SolveError::NonFinite {
+            what: format!("matrix entry {i}"),
+        });
+    }
+    let indptr = a.indptr().to_proper().into_owned();
+    Ok(CsMat::new(
+        (a.rows(), a.cols()),
+        indptr,
+        a.indices().to_vec(),
+        a.data().to_vec(),
+    ))
 }
 
-impl Csr {
-    /// Copies a square `sprs` CSR matrix, checking its entries are finite.
-    pub(crate) fn from_sprs(a: &CsMat<f64>) -> Result<Csr, SolveError> {
-        if !a.is_csr() {
-            return Err(SolveError::InvalidInput {
-                what: "Krylov solvers take a CSR matrix (got CSC)".into(),
-            });
-        }
-        if a.rows() != a.cols() {
-            return Err(SolveError::InvalidInput {
-                what: format!("matrix is {}x{}, not square", a.rows(), a.cols()),
-            });
-        }
-        if let Some(i) = a.data().iter().position(|v| !v.is_finite()) {
-            return Err(SolveError::NonFinite {
-                what: format!("matrix entry {i}"),
-            });
-        }
-        let indptr = a.indptr().to_proper().into_owned();
-        Ok(Csr {
-            rows: a.rows(),
-            cols: a.cols(),
-            indptr,
-            indices: a.indices().to_vec(),
-            data: a.data().to_vec(),
-        })
+/// Row access and the products of the solvers on a [`Csr`] (as built by [`from_sprs`] or
+/// [`RowBuilder`]).
+pub(crate) trait CsrOps {
+    /// The index pointer as a plain slice.
+    fn ptr(&self) -> &[usize];
+    /// Column indices and values of row i.
+    fn row_of(&self, i: usize) -> (&[usize], &[f64]);
+    fn row_dot(&self, i: usize, x: &[f64]) -> f64;
+    /// y = A·x, parallel over rows when the matrix is large.
+    fn spmv(&self, x: &[f64], y: &mut [f64]);
+    /// Position of the diagonal entry of each row, `None` if one is missing.
+    fn diagonal_positions(&self) -> Option<Vec<usize>>;
+    /// The diagonal (0 where an entry is missing).
+    fn diagonal_values(&self) -> Vec<f64>;
+    /// A·B by rows with a dense accumulator (Gustavson 1978); rows come out sorted.
+    fn product(&self, b: &Csr) -> Csr;
+}
+
+/// Position of row i's diagonal entry in the value array, `None` if it is missing.
+fn diagonal_position(a: &Csr, i: usize) -> Option<usize> {
+    let p = a.row_of(i).0.binary_search(&i).ok()?;
+    Some(p + a.ptr()[i])
+}
+
+impl CsrOps for Csr {
+    #[inline]
+    fn ptr(&self) -> &[usize] {
+        self.indptr().into_raw_storage()
     }
 
     #[inline]
-    pub(crate) fn row(&self, i: usize) -> (&[usize], &[f64]) {
-        let (s, e) = (self.indptr[i], self.indptr[i + 1]);
-        (&self.indices[s..e], &self.data[s..e])
+    fn row_of(&self, i: usize) -> (&[usize], &[f64]) {
+        let (s, e) = (self.ptr()[i], self.ptr()[i + 1]);
+        (&self.indices()[s..e], &self.data()[s..e])
     }
 
     #[inline]
-    pub(crate) fn row_dot(&self, i: usize, x: &[f64]) -> f64 {
-        let (cols, vals) = self.row(i);
+    fn row_dot(&self, i: usize, x: &[f64]) -> f64 {
+        let (cols, vals) = self.row_of(i);
         cols.iter().zip(vals).map(|(&j, &v)| v * x[j]).sum()
     }
 
-    /// y = A·x, parallel over rows when the matrix is large.
-    pub(crate) fn spmv(&self, x: &[f64], y: &mut [f64]) {
-        if self.rows >= PARALLEL_ROWS {
+    fn spmv(&self, x: &[f64], y: &mut [f64]) {
+        if self.rows() >= PARALLEL_ROWS {
             y.par_iter_mut()
                 .enumerate()
                 .with_min_len(4096)
@@ -80,60 +102,24 @@ impl Csr {
         }
     }
 
-    /// Position of row i's diagonal entry in the value array, `None` if it is missing.
-    fn diagonal_position(&self, i: usize) -> Option<usize> {
-        let p = self.row(i).0.binary_search(&i).ok()?;
-        Some(p + self.indptr[i])
-    }
-
-    /// Position of the diagonal entry of each row, `None` if one is missing.
-    pub(crate) fn diagonal_positions(&self) -> Option<Vec<usize>> {
-        (0..self.rows).map(|i| self.diagonal_position(i)).collect()
-    }
-
-    /// The diagonal (0 where an entry is missing).
-    pub(crate) fn diagonal(&self) -> Vec<f64> {
-        (0..self.rows)
-            .map(|i| self.diagonal_position(i).map_or(0.0, |p| self.data[p]))
+    fn diagonal_positions(&self) -> Option<Vec<usize>> {
+        (0..self.rows())
+            .map(|i| diagonal_position(self, i))
             .collect()
     }
 
-    /// Aᵀ (count → prefix sum → fill; rows come out sorted).
-    pub(crate) fn transpose(&self) -> Csr {
-        let mut indptr = vec![0usize; self.cols + 1];
-        for &j in &self.indices {
-            indptr[j + 1] += 1;
-        }
-        for j in 0..self.cols {
-            indptr[j + 1] += indptr[j];
-        }
-        let mut fill = indptr.clone();
-        let mut indices = vec![0usize; self.indices.len()];
-        let mut data = vec![0.0; self.data.len()];
-        for i in 0..self.rows {
-            let (cols, vals) = self.row(i);
-            for (&j, &v) in cols.iter().zip(vals) {
-                indices[fill[j]] = i;
-                data[fill[j]] = v;
-                fill[j] += 1;
-            }
-        }
-        Csr {
-            rows: self.cols,
-            cols: self.rows,
-            indptr,
-            indices,
-            data,
-        }
+    fn diagonal_values(&self) -> Vec<f64> {
+        (0..self.rows())
+            .map(|i| diagonal_position(self, i).map_or(0.0, |p| self.data()[p]))
+            .collect()
     }
 
-    /// A·B by rows with a dense accumulator (Gustavson 1978); rows come out sorted.
-    pub(crate) fn mul(&self, b: &Csr) -> Csr {
-        let mut out = RowBuilder::new(self.rows, b.cols);
-        for i in 0..self.rows {
-            let (ac, av) = self.row(i);
+    fn product(&self, b: &Csr) -> Csr {
+        let mut out = RowBuilder::new(self.rows(), b.cols());
+        for i in 0..self.rows() {
+            let (ac, av) = self.row_of(i);
             for (&k, &a_ik) in ac.iter().zip(av) {
-                let (bc, bv) = b.row(k);
+                let (bc, bv) = b.row_of(k);
                 for (&j, &b_kj) in bc.iter().zip(bv) {
                     out.add(j, a_ik * b_kj);
                 }
@@ -193,13 +179,7 @@ impl RowBuilder {
 
     pub(crate) fn build(self) -> Csr {
         debug_assert_eq!(self.indptr.len(), self.rows + 1);
-        Csr {
-            rows: self.rows,
-            cols: self.cols,
-            indptr: self.indptr,
-            indices: self.indices,
-            data: self.data,
-        }
+        CsMat::new((self.rows, self.cols), self.indptr, self.indices, self.data)
     }
 }
 
@@ -214,11 +194,11 @@ pub(crate) fn residual(a: &Csr, b: &[f64], x: &[f64], r: &mut [f64]) -> f64 {
 }
 
 pub(crate) fn check_vectors(a: &Csr, b: &[f64], x: &[f64]) -> Result<(), SolveError> {
-    if b.len() != a.rows || x.len() != a.rows {
+    if b.len() != a.rows() || x.len() != a.rows() {
         return Err(SolveError::InvalidInput {
             what: format!(
                 "matrix has {} rows but b has {} and x has {} entries",
-                a.rows,
+                a.rows(),
                 b.len(),
                 x.len()
             ),

@@ -3,7 +3,7 @@
 //! largest meshes, where IC(0)'s iteration count grows like √n and the V-cycle's hardly grows.
 #![forbid(unsafe_code)]
 
-use crate::linalg::sparse::{residual, Csr, RowBuilder};
+use crate::linalg::sparse::{residual, Csr, CsrOps, RowBuilder};
 
 /// Strength-of-connection threshold: node J is a strong neighbour of I when the largest
 /// |a_ij| between their unknowns is ≥ θ·√(d_I·d_J), d the largest diagonal magnitude.
@@ -34,7 +34,7 @@ impl Amg {
     /// `None` when the block size does not divide the matrix, a diagonal is zero, or the
     /// coarsest matrix is singular or too large.
     pub(crate) fn build(a: &Csr, block: usize) -> Option<Amg> {
-        if block == 0 || a.rows % block != 0 || a.rows == 0 {
+        if block == 0 || a.rows() % block != 0 || a.rows() == 0 {
             return None;
         }
         let fine_inv_diag = inverse_diagonal(a)?;
@@ -44,17 +44,17 @@ impl Amg {
                 Some(l) => (&l.coarse, &l.coarse_inv_diag),
                 None => (a, &fine_inv_diag),
             };
-            if cur.rows <= AMG_COARSEST || levels.len() >= 30 {
+            if cur.rows() <= AMG_COARSEST || levels.len() >= 30 {
                 break;
             }
             let (agg, n_agg) = aggregate(cur, block);
-            if n_agg * block * 10 > cur.rows * 9 {
+            if n_agg * block * 10 > cur.rows() * 9 {
                 break; // coarsening stalled
             }
             let p = smoothed_prolongator(cur, inv_diag, &agg, block, n_agg * block);
-            let r = p.transpose();
+            let r = p.transpose_view().to_csr();
             // Galerkin coarse operator A_c = Pᵀ·A·P.
-            let coarse = r.mul(&cur.mul(&p));
+            let coarse = r.product(&cur.product(&p));
             let coarse_inv_diag = inverse_diagonal(&coarse)?;
             levels.push(AmgLevel {
                 p,
@@ -64,7 +64,7 @@ impl Amg {
             });
         }
         let last = levels.last().map_or(a, |l| &l.coarse);
-        if last.rows > 2 * AMG_COARSEST {
+        if last.rows() > 2 * AMG_COARSEST {
             return None; // a dense solve this large would cost more than it saves
         }
         let coarsest = DenseLu::factor(last)?;
@@ -88,11 +88,11 @@ impl Amg {
         x.fill(0.0);
         gauss_seidel(a, inv_diag, b, x, false);
         // Coarse correction: x += P·cycle(Pᵀ(b − A x)).
-        let mut res = vec![0.0; a.rows];
+        let mut res = vec![0.0; a.rows()];
         residual(a, b, x, &mut res);
-        let mut bc = vec![0.0; lev.r.rows];
+        let mut bc = vec![0.0; lev.r.rows()];
         lev.r.spmv(&res, &mut bc);
-        let mut xc = vec![0.0; lev.r.rows];
+        let mut xc = vec![0.0; lev.r.rows()];
         self.cycle(l + 1, &lev.coarse, &lev.coarse_inv_diag, &bc, &mut xc);
         lev.p.spmv(&xc, &mut res);
         for (xi, ci) in x.iter_mut().zip(&res) {
@@ -107,7 +107,7 @@ fn inverse_diagonal(a: &Csr) -> Option<Vec<f64>> {
     let pos = a.diagonal_positions()?;
     pos.iter()
         .map(|&p| {
-            let d = a.data[p];
+            let d = a.data()[p];
             (d != 0.0 && d.is_finite()).then(|| 1.0 / d)
         })
         .collect()
@@ -116,7 +116,7 @@ fn inverse_diagonal(a: &Csr) -> Option<Vec<f64>> {
 /// One Gauss–Seidel sweep x_i ← (b_i − Σ_{j≠i} a_ij x_j)/a_ii, forward or backward.
 fn gauss_seidel(a: &Csr, inv_diag: &[f64], b: &[f64], x: &mut [f64], backward: bool) {
     let update = |i: usize, x: &mut [f64]| {
-        let (cols, vals) = a.row(i);
+        let (cols, vals) = a.row_of(i);
         let mut s = b[i];
         for (&j, &v) in cols.iter().zip(vals) {
             if j != i {
@@ -126,11 +126,11 @@ fn gauss_seidel(a: &Csr, inv_diag: &[f64], b: &[f64], x: &mut [f64], backward: b
         x[i] = s * inv_diag[i];
     };
     if backward {
-        for i in (0..a.rows).rev() {
+        for i in (0..a.rows()).rev() {
             update(i, x);
         }
     } else {
-        for i in 0..a.rows {
+        for i in 0..a.rows() {
             update(i, x);
         }
     }
@@ -141,11 +141,11 @@ fn gauss_seidel(a: &Csr, inv_diag: &[f64], b: &[f64], x: &mut [f64], backward: b
 /// with them, (2) left-over nodes join a neighbouring aggregate of step 1, (3) the rest seed
 /// new aggregates with their free neighbours. Returns node → aggregate and the count.
 fn aggregate(a: &Csr, block: usize) -> (Vec<usize>, usize) {
-    let nn = a.rows / block;
+    let nn = a.rows() / block;
     // Node diagonal scale d_I = max_c |a_(I,c),(I,c)|.
     let mut diag = vec![0.0f64; nn];
-    for i in 0..a.rows {
-        let (cols, vals) = a.row(i);
+    for i in 0..a.rows() {
+        let (cols, vals) = a.row_of(i);
         if let Ok(p) = cols.binary_search(&i) {
             diag[i / block] = diag[i / block].max(vals[p].abs());
         }
@@ -156,7 +156,7 @@ fn aggregate(a: &Csr, block: usize) -> (Vec<usize>, usize) {
     let mut touched = Vec::new();
     for node in 0..nn {
         for i in node * block..(node + 1) * block {
-            let (cols, vals) = a.row(i);
+            let (cols, vals) = a.row_of(i);
             for (&j, &v) in cols.iter().zip(vals) {
                 let other = j / block;
                 if other != node && v != 0.0 {
@@ -218,14 +218,14 @@ fn aggregate(a: &Csr, block: usize) -> (Vec<usize>, usize) {
 /// coarse unknown c of aggregate(I)), ω = 4/(3ρ) with ρ ≥ ρ(D⁻¹A) by Gershgorin.
 fn smoothed_prolongator(a: &Csr, inv_diag: &[f64], agg: &[usize], block: usize, nc: usize) -> Csr {
     let coarse_of = |j: usize| agg[j / block] * block + j % block;
-    let rho = (0..a.rows)
-        .map(|i| a.row(i).1.iter().map(|v| v.abs()).sum::<f64>() * inv_diag[i].abs())
+    let rho = (0..a.rows())
+        .map(|i| a.row_of(i).1.iter().map(|v| v.abs()).sum::<f64>() * inv_diag[i].abs())
         .fold(0.0f64, f64::max);
     let omega = if rho > 0.0 { 4.0 / (3.0 * rho) } else { 0.0 };
-    let mut out = RowBuilder::new(a.rows, nc);
-    for i in 0..a.rows {
+    let mut out = RowBuilder::new(a.rows(), nc);
+    for i in 0..a.rows() {
         out.add(coarse_of(i), 1.0);
-        let (cols, vals) = a.row(i);
+        let (cols, vals) = a.row_of(i);
         for (&j, &v) in cols.iter().zip(vals) {
             out.add(coarse_of(j), -omega * inv_diag[i] * v);
         }
@@ -244,10 +244,10 @@ struct DenseLu {
 impl DenseLu {
     /// `None` when a pivot is negligible against the matrix scale (singular matrix).
     fn factor(a: &Csr) -> Option<DenseLu> {
-        let n = a.rows;
+        let n = a.rows();
         let mut lu = vec![0.0; n * n];
         for i in 0..n {
-            let (cols, vals) = a.row(i);
+            let (cols, vals) = a.row_of(i);
             for (&j, &v) in cols.iter().zip(vals) {
                 lu[i * n + j] += v;
             }

@@ -3,7 +3,7 @@
 //! (Jacobi) leaves too many iterations; cheap to build (one pass over the matrix).
 #![forbid(unsafe_code)]
 
-use crate::linalg::sparse::Csr;
+use crate::linalg::sparse::{Csr, CsrOps};
 
 /// Incomplete Cholesky IC(0) with the pattern of tril(A), A ≈ LLᵀ.
 ///
@@ -19,14 +19,14 @@ pub(crate) struct Ic0 {
 impl Ic0 {
     /// Factorises A + shift·diag(A); `None` on a missing, non-positive or non-finite pivot.
     pub(crate) fn factor(a: &Csr, shift: f64) -> Option<Ic0> {
-        let n = a.rows;
+        let n = a.rows();
         let mut colptr = Vec::with_capacity(n + 1);
         let mut rows = Vec::new();
         let mut values = Vec::new();
         let mut orig_diag = Vec::with_capacity(n);
         colptr.push(0);
         for k in 0..n {
-            let (cols, vals) = a.row(k);
+            let (cols, vals) = a.row_of(k);
             let first = cols.partition_point(|&j| j < k);
             if cols.get(first) != Some(&k) {
                 return None;

@@ -17,7 +17,7 @@ mod ilu0;
 use self::amg::Amg;
 use self::ic0::Ic0;
 use self::ilu0::Ilu0;
-use super::sparse::Csr;
+use super::sparse::{Csr, CsrOps};
 use super::SolveError;
 
 /// Which preconditioner a Krylov solve uses.
@@ -94,7 +94,7 @@ pub(crate) fn build_precond(
             }
         }
     }
-    let diag = a.diagonal();
+    let diag = a.diagonal_values();
     let mut inv = Vec::with_capacity(diag.len());
     for (i, &d) in diag.iter().enumerate() {
         if spd && d < 0.0 {
