@@ -22,6 +22,7 @@
 use serde::Serialize;
 
 use crate::linalg::small::{svd2_signed_values, Mat2};
+use crate::linalg::vec3::{cross, dot, norm, sub};
 
 /// Distortion of one face.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -84,20 +85,14 @@ fn sd(s1: f64, s2: f64) -> f64 {
 /// area. The triangle is laid in its plane with p0 at the origin and x along p1 − p0:
 /// J = [uv1 − uv0, uv2 − uv0]·[x1 − x0, x2 − x0]⁻¹. `None` for a zero-area 3D triangle.
 pub fn face_jacobian(p: [[f64; 3]; 3], uv: [[f64; 2]; 3]) -> Option<(Mat2, f64)> {
-    let e1 = [p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]];
-    let e2 = [p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]];
-    let l1 = (e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]).sqrt();
-    let n = [
-        e1[1] * e2[2] - e1[2] * e2[1],
-        e1[2] * e2[0] - e1[0] * e2[2],
-        e1[0] * e2[1] - e1[1] * e2[0],
-    ];
-    let n_len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
+    let l1 = norm(e1);
+    let n_len = norm(cross(e1, e2));
     if l1 <= 0.0 || n_len <= 0.0 || !n_len.is_finite() {
         return None;
     }
     // Frame coordinates: x1 = (|e1|, 0), x2 = (e2·e1/|e1|, |e1×e2|/|e1|).
-    let x2x = (e1[0] * e2[0] + e1[1] * e2[1] + e1[2] * e2[2]) / l1;
+    let x2x = dot(e1, e2) / l1;
     let x2y = n_len / l1;
     let (du1, dv1) = (uv[1][0] - uv[0][0], uv[1][1] - uv[0][1]);
     let (du2, dv2) = (uv[2][0] - uv[0][0], uv[2][1] - uv[0][1]);

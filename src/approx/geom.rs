@@ -1,38 +1,11 @@
-//! Small 3-vector and plane helpers shared by the approximation stages (kept local so the
-//! stages read as formulas, not as calls into a linear-algebra crate).
+//! Plane and polygon helpers shared by the approximation stages, over the crate's 3-vector
+//! functions ([`crate::linalg::vec3`], re-exported here so the stages read as formulas).
 
 use crate::linalg::small::sym_eigen;
 use crate::mesh::TriMesh;
 
-pub type V3 = [f64; 3];
-
-pub fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-pub fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-pub fn scale(a: V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-pub fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-pub fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-pub fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
-}
-/// Unit vector along `a`, or `None` for a (numerically) zero vector.
-pub fn normalize(a: V3) -> Option<V3> {
-    let l = norm(a);
-    (l > 0.0 && l.is_finite()).then(|| scale(a, 1.0 / l))
-}
+pub use crate::linalg::rng::SplitMix;
+pub use crate::linalg::vec3::{add, cross, dot, norm, normalize, scale, sub, V3};
 
 /// Area-scaled normal (half the cross product) of face `f` at `pos`.
 pub fn face_area_normal(pos: &[V3], f: [u32; 3]) -> V3 {
@@ -223,23 +196,6 @@ pub fn solve_dense(a: &mut [f64], b: &mut [f64], n: usize) -> Option<()> {
         b[col] = s / a[col * n + col];
     }
     Some(())
-}
-
-/// Deterministic pseudo-random numbers (SplitMix64): reproducible seeds without a dependency.
-pub struct SplitMix(pub u64);
-
-impl SplitMix {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform integer in 0..n (n > 0); the modulo bias is irrelevant for seed shuffling.
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n.max(1) as u64) as usize
-    }
 }
 
 #[cfg(test)]

@@ -423,15 +423,10 @@ pub(crate) mod tests {
         }
     }
 
-    /// Deterministic numbers in [-1, 1) (a 64-bit LCG) for random tangles.
+    /// Deterministic numbers in [-1, 1) for random tangles.
     pub(crate) fn uniform(seed: u64) -> impl FnMut() -> f64 {
-        let mut state = seed;
-        move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        }
+        let mut rng = crate::linalg::rng::SplitMix(seed);
+        move || rng.symmetric()
     }
 
     /// Positions, faces, face regions and region planes of a test layout.

@@ -10,6 +10,9 @@
 //! pushed to positive determinants. Each round is an L-BFGS minimisation.
 #![forbid(unsafe_code)]
 
+use crate::linalg::lbfgs::{minimise, next_eps, LbfgsOptions, Objective};
+use crate::param::energy::det;
+
 /// Parameters of [`untangle_2d`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Untangle2dOptions {
@@ -96,13 +99,9 @@ fn jacobian(q: &[[f64; 2]; 3], r: &Reference) -> [f64; 4] {
     ]
 }
 
-fn det2(j: &[f64; 4]) -> f64 {
-    j[0] * j[3] - j[1] * j[2]
-}
-
 /// Jacobian determinant of the triangle `q` against its reference (≤ 0: inverted).
 pub(crate) fn triangle_det(q: &[[f64; 2]; 3], r: &Reference) -> f64 {
-    det2(&jacobian(q, r))
+    det(&jacobian(q, r))
 }
 
 /// Regularised energy of one triangle with corners `q` (see module doc) and, with `grad`, its
@@ -115,7 +114,7 @@ pub(crate) fn triangle_energy(
     grad: Option<&mut [[f64; 2]; 3]>,
 ) -> f64 {
     let j = jacobian(q, r);
-    let d = det2(&j);
+    let d = det(&j);
     let c = chi(d, eps);
     let fro = j.iter().map(|v| v * v).sum::<f64>();
     let a = (1.0 - theta) * 0.5 * fro + theta * 0.5 * (d * d + 1.0);
@@ -211,7 +210,7 @@ impl Barrier for Problem<'_> {
 /// over flat vectors, kept so that its results stay bit-identical.
 /// (`chunks_exact`: the fixed chunk length lets the compiler drop the per-chunk length checks
 /// in this innermost loop, which the generic `chunks` keeps.)
-fn dotv(a: &[f64], b: &[f64]) -> f64 {
+fn dot_pairs(a: &[f64], b: &[f64]) -> f64 {
     let (pa, pb) = (a.chunks_exact(2), b.chunks_exact(2));
     let tail: f64 = pa
         .remainder()
@@ -225,83 +224,34 @@ fn dotv(a: &[f64], b: &[f64]) -> f64 {
         + tail
 }
 
-/// One L-BFGS memory entry: step s, gradient change y, 1/(s·y).
-type Pair = (Vec<f64>, Vec<f64>, f64);
-
-/// L-BFGS (memory 8) with backtracking Armijo steps; returns the final energy.
-fn lbfgs(p: &dyn Barrier, x: &mut [f64], eps: f64, iterations: usize) -> f64 {
-    const MEM: usize = 8;
-    let n = x.len();
-    let mut g = vec![0.0; n];
-    let mut e = p.eval(x, eps, Some(&mut g));
-    let mut hist: Vec<Pair> = Vec::new();
-    let mut xn = vec![0.0; n];
-    let mut gn = vec![0.0; n];
-    for _ in 0..iterations {
-        let gg = dotv(&g, &g);
-        if gg.sqrt() <= 1e-12 * (1.0 + e.abs()) || !e.is_finite() {
-            break;
-        }
-        // Two-loop recursion: d = -H g.
-        let mut q = g.clone();
-        let mut alphas = Vec::with_capacity(hist.len());
-        for (s, y, rho) in hist.iter().rev() {
-            let a = rho * dotv(s, &q);
-            q.iter_mut().zip(y).for_each(|(qi, yi)| *qi -= a * yi);
-            alphas.push(a);
-        }
-        let sc = match hist.last() {
-            Some((s, y, _)) => dotv(s, y) / dotv(y, y),
-            None => 1.0 / gg.sqrt().max(1e-300),
-        };
-        q.iter_mut().for_each(|v| *v *= sc);
-        for ((s, y, rho), a) in hist.iter().zip(alphas.iter().rev()) {
-            let b = rho * dotv(y, &q);
-            q.iter_mut().zip(s).for_each(|(qi, si)| *qi += (a - b) * si);
-        }
-        let mut slope = -dotv(&g, &q);
-        if slope >= 0.0 {
-            // Not a descent direction: fall back to steepest descent.
-            hist.clear();
-            let sc = 1.0 / gg.sqrt();
-            q = g.iter().map(|v| v * sc).collect();
-            slope = -dotv(&g, &q);
-        }
-        let mut t = 1.0;
-        let mut accepted = false;
-        for _ in 0..40 {
-            for i in 0..n {
-                xn[i] = x[i] - t * q[i];
-            }
-            let en = p.eval(&xn, eps, Some(&mut gn));
-            if en.is_finite() && en <= e + 1e-4 * t * slope {
-                let s: Vec<f64> = (0..n).map(|i| xn[i] - x[i]).collect();
-                let y: Vec<f64> = (0..n).map(|i| gn[i] - g[i]).collect();
-                let sy = dotv(&s, &y);
-                if sy > 1e-300 {
-                    if hist.len() == MEM {
-                        hist.remove(0);
-                    }
-                    hist.push((s, y, 1.0 / sy));
-                }
-                x.copy_from_slice(&xn);
-                g.copy_from_slice(&gn);
-                let de = e - en;
-                e = en;
-                accepted = true;
-                if de <= 1e-14 * e.abs() {
-                    return e;
-                }
-                break;
-            }
-            t *= 0.5;
-        }
-        if !accepted {
-            break;
-        }
-    }
-    e
+/// One round's L-BFGS objective: a [`Barrier`] at a fixed ε.
+struct AtEps<'a> {
+    p: &'a dyn Barrier,
+    eps: f64,
 }
+
+impl Objective for AtEps<'_> {
+    type Error = std::convert::Infallible;
+    fn value_grad(&mut self, x: &[f64], g: &mut [f64]) -> Result<f64, Self::Error> {
+        Ok(self.p.eval(x, self.eps, Some(g)))
+    }
+    fn steepest_scale(&self, g: &[f64]) -> Option<f64> {
+        Some(1.0 / dot_pairs(g, g).sqrt().max(1e-300))
+    }
+    fn dot(&self, a: &[f64], b: &[f64]) -> f64 {
+        dot_pairs(a, b)
+    }
+}
+
+/// L-BFGS settings of a round (memory 8, the iteration cap is the options').
+const LBFGS: LbfgsOptions = LbfgsOptions {
+    memory: 8,
+    max_iterations: 0,
+    gradient_tolerance: Some(1e-12),
+    rel_decrease: 1e-14,
+    curvature_rel: 0.0,
+    curvature_abs: 1e-300,
+};
 
 /// Moves the `free` vertices of `x` to untangle the triangles `faces` (local vertex indices)
 /// against their `refs` (see module doc). Fixed vertices are not touched. Stops as soon as no
@@ -344,7 +294,12 @@ pub(crate) fn minimise_rounds(
     let mut since_best = 0;
     while rounds < opts.max_rounds && since_best < opts.stall_rounds {
         rounds += 1;
-        let e = lbfgs(p, x, eps, opts.iterations);
+        let lbfgs = LbfgsOptions {
+            max_iterations: opts.iterations,
+            ..LBFGS
+        };
+        let r = minimise(&mut AtEps { p, eps }, x, &lbfgs).unwrap_or_else(|never| match never {});
+        let e = r.energy;
         (min_det, inverted) = p.min_det(x);
         if inverted < best.0 {
             best = (inverted, x.to_vec());
@@ -357,13 +312,7 @@ pub(crate) fn minimise_rounds(
         }
         // ε update of Garanzha et al.: shrink by the relative energy decrease, but keep χ of
         // the worst triangle bounded away from zero.
-        let sigma = (1.0 - e / e_prev).max(0.1);
-        let mu = (1.0 - sigma) * chi(min_det, eps);
-        eps = if min_det < mu {
-            2.0 * (mu * (mu - min_det)).sqrt()
-        } else {
-            1e-10
-        };
+        eps = next_eps(e, e_prev, min_det, chi(min_det, eps));
         e_prev = p.eval(x, eps, None);
     }
     if best.0 < inverted {

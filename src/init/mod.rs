@@ -194,29 +194,8 @@ pub(crate) fn unreached(n: usize, edges: &[[u32; 2]], used: &[bool], sources: &[
     (0..n).filter(|&v| used[v] && !seen[v]).count()
 }
 
-/// 3D vector helpers shared by the crate (starting maps, cutting, tet maps).
-pub mod vec3 {
-    #[inline]
-    pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-        [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-    }
-    #[inline]
-    pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-        a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    }
-    #[inline]
-    pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    }
-    #[inline]
-    pub fn norm(a: [f64; 3]) -> f64 {
-        dot(a, a).sqrt()
-    }
-}
+/// 3D vector helpers (the crate's one copy lives in [`crate::linalg::vec3`]).
+pub use crate::linalg::vec3;
 
 /// Which start map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,12 +1,54 @@
-//! Sparse and small dense linear algebra: preconditioned conjugate gradient (and BiCGSTAB)
-//! over `sprs` matrices, and closed-form 2x2 / small symmetric helpers used by the solvers and
-//! their GPU twins.
+//! The crate's one numerical core: sparse iterative solvers and small dense linear algebra.
+//!
+//! - [`sparse`]: the one CSR matrix type of the solvers (converted from `sprs`, which callers
+//!   assemble into);
+//! - [`krylov`]: CG and BiCGSTAB, one-call and precompute-once/solve-many;
+//! - [`precond`]: Jacobi, IC(0), ILU(0) and smoothed-aggregation AMG;
+//! - [`small`]: closed-form 2×2 / 3×3 helpers (SVD, eigen-decompositions, PSD projection) used
+//!   by the solvers and their GPU twins; [`vec3`]: 3-vector arithmetic on `[f64; 3]`;
+//! - [`pattern`]: the block-sparse pattern of a per-simplex Hessian; [`lbfgs`]: L-BFGS for the
+//!   barrier-energy untanglers; [`rng`]: the crate's seeded pseudo-random numbers;
+//! - here: slice [`dot`] / [`norm`] and the thread-count-independent [`ordered_sum`].
+//!
+//! `linalg::direct` is reserved for a sparse direct (Cholesky) solver.
 #![forbid(unsafe_code)]
 
-pub mod cg;
+pub mod krylov;
+pub mod lbfgs;
+pub mod pattern;
+pub mod precond;
+pub mod rng;
 pub mod small;
+pub mod sparse;
+pub mod vec3;
+
+/// The solver API under its historic path (`linalg::cg::pcg`, …), kept for call sites.
+pub mod cg {
+    pub use super::krylov::*;
+    pub use super::precond::Preconditioner;
+    pub use super::sparse::PARALLEL_ROWS;
+}
 
 use rayon::prelude::*;
+
+/// Σ a_i·b_i over the common length, summed in order (the solvers' and energies' one slice
+/// dot product).
+#[inline]
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Euclidean norm √(a·a) of a slice.
+#[inline]
+pub fn norm(a: &[f64]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// [`dot`] for long vectors: in parallel, summed by [`ordered_sum`] so its bits do not depend
+/// on the thread count (equal to [`dot`] up to [`SUM_CHUNK`] entries).
+pub fn par_dot(a: &[f64], b: &[f64]) -> f64 {
+    ordered_sum(a.len(), |i| a[i] * b[i])
+}
 
 /// Items per chunk of [`ordered_sum`].
 pub const SUM_CHUNK: usize = 4096;

@@ -44,13 +44,6 @@ pub fn mul2(a: &Mat2, b: &Mat2) -> Mat2 {
     ]
 }
 
-/// The rotation matrix by angle `t` (counter-clockwise).
-#[inline]
-pub fn rot2(t: f64) -> Mat2 {
-    let (s, c) = t.sin_cos();
-    [[c, -s], [s, c]]
-}
-
 /// Similarity / anti-similarity split of a 2x2 matrix `[[a, b], [c, d]]`:
 /// E = (a+d)/2, F = (a−d)/2, G = (c+b)/2, H = (c−b)/2, so that
 /// M = [[E, −H], [H, E]] + [[F, G], [G, −F]] (conformal part + anti-conformal part).
@@ -78,6 +71,45 @@ pub fn svd2_signed_values(m: &Mat2) -> [f64; 2] {
     [q + r, q - r]
 }
 
+/// `(cos x, sin x)` of half the angle whose cosine and sine are `(c, s)` (unit vector), taking
+/// the half angle in (−π/2, π/2]; each branch divides by the larger of the two results.
+pub fn half_angle(c: f64, s: f64) -> [f64; 2] {
+    if c >= 0.0 {
+        let ch = (0.5 * (1.0 + c)).sqrt();
+        [ch, s / (2.0 * ch)]
+    } else {
+        let sh = (0.5 * (1.0 - c)).sqrt();
+        // s/(2 sh) is cos(x/2); its sign follows s, so flip both to keep cos ≥ 0.
+        let ch = s / (2.0 * sh);
+        if ch >= 0.0 {
+            [ch, sh]
+        } else {
+            [-ch, -sh]
+        }
+    }
+}
+
+/// The crate's signed SVD of a 2x2 `A = U diag(σ1, σ2) Vᵀ` with rotations `U = rot(φ)`, `Vᵀ = rot(θ)`,
+/// σ1 ≥ |σ2| (σ2 < 0 iff det A < 0). Returned as `(cos φ, sin φ, σ1, σ2, cos θ, sin θ)`.
+///
+/// With E, F, G, H the conformal / anti-conformal parts, `a1 = ∠(F, G)`, `a2 = ∠(E, H)`:
+/// `φ = (a1 + a2)/2`, `θ = φ − a1`. Computed without trigonometric calls (half-angle of the
+/// sum, then a rotation), which were 30% of the face step; the GLSL twin in
+/// `glsl/common/admm.glsl` does the same. Input and rotations are row-major `[a00, a01, a10, a11]`.
+pub fn svd2(a: &[f64; 4]) -> [f64; 6] {
+    let [e, f, g, h] = efgh(&[[a[0], a[1]], [a[2], a[3]]]);
+    let q = (e * e + h * h).sqrt();
+    let r = (f * f + g * g).sqrt();
+    // Unit vectors of a1 and a2; an arbitrary angle (0) where the part vanishes.
+    let (c1, s1) = if r > 0.0 { (f / r, g / r) } else { (1.0, 0.0) };
+    let (c2, s2) = if q > 0.0 { (e / q, h / q) } else { (1.0, 0.0) };
+    let [cp, sp] = half_angle(c1 * c2 - s1 * s2, s1 * c2 + c1 * s2);
+    // θ = φ − a1.
+    let ct = cp * c1 + sp * s1;
+    let st = sp * c1 - cp * s1;
+    [cp, sp, q + r, q - r, ct, st]
+}
+
 /// A signed SVD of a 2x2 matrix: `M = U · diag(σ1, σ2) · Vᵀ` with `U`, `V` rotations
 /// (det = +1) and σ2 carrying the sign of det M.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -87,22 +119,14 @@ pub struct Svd2 {
     pub v: Mat2,
 }
 
-/// Signed SVD with rotation factors (closed form, see [`svd2_signed_values`]).
-///
-/// With a1 = atan2(G, F), a2 = atan2(H, E): M = R(φ)·diag(σ1, σ2)·R(θ), θ = (a2 − a1)/2,
-/// φ = (a2 + a1)/2, hence U = R(φ) and V = R(−θ).
+/// [`svd2`] with the factors as matrices.
 pub fn svd2_signed(m: &Mat2) -> Svd2 {
-    let [e, f, g, h] = efgh(m);
-    let q = e.hypot(h);
-    let r = f.hypot(g);
-    let a1 = g.atan2(f);
-    let a2 = h.atan2(e);
-    let theta = 0.5 * (a2 - a1);
-    let phi = 0.5 * (a2 + a1);
+    let [cu, su, s1, s2, ct, st] = svd2(&[m[0][0], m[0][1], m[1][0], m[1][1]]);
+    // Vᵀ = rot(θ), so V = rot(−θ).
     Svd2 {
-        u: rot2(phi),
-        sigma: [q + r, q - r],
-        v: rot2(-theta),
+        u: [[cu, -su], [su, cu]],
+        sigma: [s1, s2],
+        v: [[ct, st], [-st, ct]],
     }
 }
 

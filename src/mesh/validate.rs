@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use super::{formats, MeshError, Scale, Topology, TriMesh};
+use crate::linalg::vec3::{cross, norm, sub};
 
 /// Thresholds of [`validate`].
 #[derive(Clone, Debug, PartialEq)]
@@ -282,14 +283,7 @@ pub(crate) fn first_duplicate<const N: usize>(cells: &[[u32; N]]) -> Option<(usi
 
 /// ½|(p1−p0)×(p2−p0)|; indices already checked.
 fn face_area([p0, p1, p2]: [[f64; 3]; 3]) -> f64 {
-    let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
-    let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
-    let n = [
-        e1[1] * e2[2] - e1[2] * e2[1],
-        e1[2] * e2[0] - e1[0] * e2[2],
-        e1[0] * e2[1] - e1[1] * e2[0],
-    ];
-    0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+    0.5 * norm(cross(sub(p1, p0), sub(p2, p0)))
 }
 
 /// Direction `(from, to)` in which face `f` traverses edge `e`.

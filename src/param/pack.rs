@@ -903,13 +903,8 @@ mod tests {
     /// triangle touches (random triangles, grown by the same epsilon).
     #[test]
     fn scanline_raster_matches_the_separating_axis_test() {
-        let mut state = 0x9e3779b97f4a7c15u64;
-        let mut rnd = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::linalg::rng::SplitMix(0x9e3779b97f4a7c15);
+        let mut rnd = || rng.unit();
         for _ in 0..200 {
             let p: Vec<[f64; 2]> = (0..3).map(|_| [rnd() * 12.0, rnd() * 9.0]).collect();
             let m = Mask::rasterize(&p, &[[0, 1, 2]]);

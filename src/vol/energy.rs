@@ -260,21 +260,15 @@ pub fn sym_dirichlet_hessian_exact(m: &Mat3) -> Option<[[f64; 9]; 9]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::linalg::rng::SplitMix;
     use crate::linalg::small::project_psd;
 
-    fn rng(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((*seed >> 11) as f64) / ((1u64 << 53) as f64) * 2.0 - 1.0
-    }
-
-    fn random_positive(seed: &mut u64) -> Mat3 {
+    fn random_positive(seed: &mut SplitMix) -> Mat3 {
         loop {
             let mut m = [[0.0; 3]; 3];
             for r in 0..3 {
                 for c in 0..3 {
-                    m[r][c] = rng(seed) * 1.5 + if r == c { 0.3 } else { 0.0 };
+                    m[r][c] = seed.symmetric() * 1.5 + if r == c { 0.3 } else { 0.0 };
                 }
             }
             if det3(&m) > 0.05 {
@@ -285,7 +279,7 @@ mod tests {
 
     #[test]
     fn gradient_and_hessian_match_finite_differences() {
-        let mut seed = 7;
+        let mut seed = SplitMix(7);
         for _ in 0..20 {
             let m = random_positive(&mut seed);
             let (e, g) = sym_dirichlet_grad(&m).unwrap();
@@ -314,7 +308,7 @@ mod tests {
 
     #[test]
     fn analytic_projection_matches_numeric_projection() {
-        let mut seed = 11;
+        let mut seed = SplitMix(11);
         for _ in 0..200 {
             let m = random_positive(&mut seed);
             let exact = sym_dirichlet_hessian_exact(&m).unwrap();

@@ -7,6 +7,7 @@ use sprs::TriMat;
 use super::tet::TetMesh;
 use super::VolError;
 use crate::linalg::cg::pcg_multi;
+use crate::linalg::pattern::neighbours;
 
 /// Positions `base + u` where u is harmonic (graph Laplacian of the tet edges) with
 /// u = target − base on the constrained vertices. `base` = rest positions extends a
@@ -23,20 +24,7 @@ pub fn harmonic_extension(
         let b = base[*v as usize];
         known[*v as usize] = Some([t[0] - b[0], t[1] - b[1], t[2] - b[2]]);
     }
-    let mut nb: Vec<Vec<u32>> = vec![Vec::new(); nv];
-    for t in &mesh.tets {
-        for &a in t {
-            for &b in t {
-                if a != b {
-                    nb[a as usize].push(b);
-                }
-            }
-        }
-    }
-    for l in &mut nb {
-        l.sort_unstable();
-        l.dedup();
-    }
+    let nb = neighbours(nv, &mesh.tets, false);
     let mut index = vec![usize::MAX; nv];
     let mut free = Vec::new();
     for v in 0..nv {

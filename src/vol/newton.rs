@@ -12,12 +12,12 @@
 //! flip-free step, gradient norm and cumulative PCG iterations to stderr.
 
 use rayon::prelude::*;
-use sprs::CsMat;
 
 use super::energy::{inv3, sym_dirichlet, sym_dirichlet_grad, sym_dirichlet_hessian_psd, Mat3};
 use super::line_search::max_flip_free_step;
 use super::VolError;
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
+use crate::linalg::pattern::BlockPattern;
 use crate::linalg::SolveError;
 
 /// Corner weights D (4x3) of a linear Jacobian: M = Xᵀ·D for the tet's corner rows X (4x3).
@@ -214,68 +214,7 @@ pub fn position_energy(targets: &[(u32, [f64; 3])], x: &[[f64; 3]]) -> f64 {
 
 /// CSR pattern of the 3n×3n Hessian, built once per mesh: row 3a + r holds columns 3b + s for
 /// every vertex b sharing a tet with a (and a itself), b ascending.
-pub struct Pattern {
-    pub n: usize,
-    pub indptr: Vec<usize>,
-    pub indices: Vec<usize>,
-    /// Per tet, per corner pair (i, j): position of b = `tet[j]` in a = `tet[i]`'s neighbour list.
-    pub slot: Vec<[[u32; 4]; 4]>,
-}
-
-impl Pattern {
-    pub fn new(nv: usize, tets: &[[u32; 4]]) -> Pattern {
-        let mut nb: Vec<Vec<u32>> = (0..nv as u32).map(|v| vec![v]).collect();
-        for t in tets {
-            for &a in t {
-                for &b in t {
-                    nb[a as usize].push(b);
-                }
-            }
-        }
-        for l in &mut nb {
-            l.sort_unstable();
-            l.dedup();
-        }
-        let n = 3 * nv;
-        let mut indptr = Vec::with_capacity(n + 1);
-        let mut indices = Vec::new();
-        indptr.push(0);
-        for l in &nb {
-            for _ in 0..3 {
-                for &b in l {
-                    for s in 0..3 {
-                        indices.push(3 * b as usize + s);
-                    }
-                }
-                indptr.push(indices.len());
-            }
-        }
-        let slot = tets
-            .iter()
-            .map(|t| {
-                let mut s = [[0u32; 4]; 4];
-                for i in 0..4 {
-                    for j in 0..4 {
-                        // binary_search cannot fail: tet[j] was inserted into tet[i]'s list.
-                        s[i][j] = nb[t[i] as usize].binary_search(&t[j]).unwrap_or(0) as u32;
-                    }
-                }
-                s
-            })
-            .collect();
-        Pattern {
-            n,
-            indptr,
-            indices,
-            slot,
-        }
-    }
-
-    #[inline]
-    fn pos(&self, a: u32, r: usize, k: u32, s: usize) -> usize {
-        self.indptr[3 * a as usize + r] + 3 * k as usize + s
-    }
-}
+pub type Pattern = BlockPattern<3, 4>;
 
 /// Stopping rules and solver choices.
 #[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
@@ -388,7 +327,7 @@ pub fn newton(
                 let p = x[*v as usize];
                 for r in 0..3 {
                     grad[3 * *v as usize + r] += 2.0 * obj.lambda * (p[r] - t[r]);
-                    data[pattern.pos(*v, r, self_slot(pattern, *v), r)] += 2.0 * obj.lambda;
+                    data[pattern.diag(*v, r)] += 2.0 * obj.lambda;
                 }
             }
         }
@@ -398,13 +337,13 @@ pub fn newton(
             let mut s = 0.0;
             for v in 0..nv as u32 {
                 for r in 0..3 {
-                    s += data[pattern.pos(v, r, self_slot(pattern, v), r)];
+                    s += data[pattern.diag(v, r)];
                 }
             }
             (s / n as f64).max(f64::MIN_POSITIVE)
         };
         for v in 0..nv as u32 {
-            let k = self_slot(pattern, v);
+            let k = pattern.diag_slot[v as usize];
             for r in 0..3 {
                 let p = pattern.pos(v, r, k, r);
                 if fixed(v) {
@@ -417,7 +356,7 @@ pub fn newton(
         // A sliding vertex's block is P·H·P (P = I − nnᵀ), singular along n: add mean_diag·nnᵀ,
         // so the normal component of its step solves mean_diag·(n·d) = n·(−Pg) = 0.
         for &v in &slide {
-            let k = self_slot(pattern, v);
+            let k = pattern.diag_slot[v as usize];
             let nrm = x[v as usize];
             for r in 0..3 {
                 for c in 0..3 {
@@ -430,12 +369,7 @@ pub fn newton(
             stats.converged = gnorm == 0.0;
             break;
         }
-        let a = CsMat::new(
-            (n, n),
-            pattern.indptr.clone(),
-            pattern.indices.clone(),
-            std::mem::take(&mut data),
-        );
+        let a = pattern.matrix(std::mem::take(&mut data));
         let rhs: Vec<f64> = grad.iter().map(|g| -g).collect();
         step.iter_mut().for_each(|v| *v = 0.0);
         let solver = KrylovSolver::cg(&a, &opts.cg)?;
@@ -451,7 +385,7 @@ pub fn newton(
         if !super::tet::is_positive(-slope) {
             // Not a descent direction (CG broke down): fall back to preconditioned gradient.
             for v in 0..nv as u32 {
-                let k = self_slot(pattern, v);
+                let k = pattern.diag_slot[v as usize];
                 for r in 0..3 {
                     let i = 3 * v as usize + r;
                     step[i] = -grad[i] / data[pattern.pos(v, r, k, r)];
@@ -549,13 +483,4 @@ fn project_tangent(tet: &[u32; 4], x: &[[f64; 3]], sliding: &dyn Fn(u32) -> bool
             }
         }
     }
-}
-
-fn self_slot(pattern: &Pattern, v: u32) -> u32 {
-    // Position of v in its own (sorted) neighbour list: the columns of row 3v are
-    // 3b + s for the sorted neighbours b, so search them.
-    let row = 3 * v as usize;
-    let cols = &pattern.indices[pattern.indptr[row]..pattern.indptr[row + 1]];
-    let target = 3 * v as usize;
-    (cols.partition_point(|&c| c < target) / 3) as u32
 }

@@ -16,7 +16,7 @@ pub struct TetMesh {
     pub tet_refs: Vec<i64>,
 }
 
-pub use crate::init::vec3::{cross, dot, sub};
+pub use crate::linalg::vec3::{cross, dot, sub};
 
 /// `p / ‖p‖`, the nearest point of the unit sphere (`None` at the centre or for non-finite
 /// input): the retraction that keeps the ball target's sliding boundary on the sphere.

@@ -1,7 +1,12 @@
 //! The CPU f64 twins of the ADMM shaders, one function per kernel, written per element so the
 //! GLSL in `glsl/admm/` can be read side by side with them. The CPU backend ([`super::cpu`])
 //! maps them over all faces / edges / slots; the tests compare each shader against its twin.
+//!
+//! The 2×2 signed SVD and the half-angle step the shaders mirror are the crate's single copies
+//! in [`crate::linalg::small`] (written trigonometry-free there because `glsl/common/admm.glsl`
+//! is); they are re-exported here so a kernel reads beside its shader.
 
+pub use crate::linalg::small::{half_angle, svd2};
 use crate::param::energy::{self, Energy};
 
 /// Maximum step halvings in the face line search.
@@ -13,47 +18,6 @@ pub const ARMIJO: f64 = 1e-4;
 /// Fraction of the largest flip-free step taken at most (the determinant root itself is not a
 /// valid step: it makes the face degenerate).
 pub const FLIP_FREE_FRACTION: f64 = 0.9;
-
-/// `(cos x, sin x)` of half the angle whose cosine and sine are `(c, s)` (unit vector), taking
-/// the half angle in (−π/2, π/2]; each branch divides by the larger of the two results.
-pub fn half_angle(c: f64, s: f64) -> [f64; 2] {
-    if c >= 0.0 {
-        let ch = (0.5 * (1.0 + c)).sqrt();
-        [ch, s / (2.0 * ch)]
-    } else {
-        let sh = (0.5 * (1.0 - c)).sqrt();
-        // s/(2 sh) is cos(x/2); its sign follows s, so flip both to keep cos ≥ 0.
-        let ch = s / (2.0 * sh);
-        if ch >= 0.0 {
-            [ch, sh]
-        } else {
-            [-ch, -sh]
-        }
-    }
-}
-
-/// Signed SVD of a 2x2 `A = U diag(σ1, σ2) Vᵀ` with rotations `U = rot(φ)`, `Vᵀ = rot(θ)`,
-/// σ1 ≥ |σ2| (σ2 < 0 iff det A < 0). Returned as `(cos φ, sin φ, σ1, σ2, cos θ, sin θ)`.
-///
-/// With E, F, G, H the conformal / anti-conformal parts, `a1 = ∠(F, G)`, `a2 = ∠(E, H)`:
-/// `φ = (a1 + a2)/2`, `θ = φ − a1`. Computed without trigonometric calls (half-angle of the
-/// sum, then a rotation), which were 30% of the face step; the GLSL twin does the same.
-pub fn svd2(a: &[f64; 4]) -> [f64; 6] {
-    let e = 0.5 * (a[0] + a[3]);
-    let f = 0.5 * (a[0] - a[3]);
-    let g = 0.5 * (a[2] + a[1]);
-    let h = 0.5 * (a[2] - a[1]);
-    let q = (e * e + h * h).sqrt();
-    let r = (f * f + g * g).sqrt();
-    // Unit vectors of a1 and a2; an arbitrary angle (0) where the part vanishes.
-    let (c1, s1) = if r > 0.0 { (f / r, g / r) } else { (1.0, 0.0) };
-    let (c2, s2) = if q > 0.0 { (e / q, h / q) } else { (1.0, 0.0) };
-    let [cp, sp] = half_angle(c1 * c2 - s1 * s2, s1 * c2 + c1 * s2);
-    // θ = φ − a1.
-    let ct = cp * c1 + sp * s1;
-    let st = sp * c1 - cp * s1;
-    [cp, sp, q + r, q - r, ct, st]
-}
 
 /// `U X Vᵀ` for `U = rot(φ)`, `Vᵀ = rot(θ)` given as cos/sin pairs; row-major.
 fn rotate(u: [f64; 2], x: [f64; 4], vt: [f64; 2]) -> [f64; 4] {
@@ -312,55 +276,6 @@ pub fn dual_update(lambda: &[f64; 4], y: &[f64; 4], a: &[f64; 4], mu: f64) -> [f
 mod tests {
     use super::*;
 
-    /// Fixed number of cyclic Jacobi sweeps for the 4x4 eigenproblem (the GLSL twin uses the same
-    /// count; 6 sweeps take a symmetric 4x4 to machine precision in practice).
-    const JACOBI_SWEEPS: usize = 6;
-
-    /// Eigen-decomposition of a symmetric 4x4 matrix by cyclic Jacobi rotations.
-    /// Returns eigenvalues and eigenvectors as the columns of `v` (`v[row][col]`).
-    fn jacobi_eigen4(h: &[[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
-        let mut a = *h;
-        let mut v = [[0.0; 4]; 4];
-        for i in 0..4 {
-            v[i][i] = 1.0;
-        }
-        for _ in 0..JACOBI_SWEEPS {
-            for p in 0..3 {
-                for q in (p + 1)..4 {
-                    let apq = a[p][q];
-                    if apq == 0.0 {
-                        continue;
-                    }
-                    // Rotation angle that zeroes a[p][q]: tan 2θ = 2 a_pq / (a_qq − a_pp).
-                    let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
-                    let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                    let t = if theta == 0.0 { 1.0 } else { t };
-                    let c = 1.0 / (t * t + 1.0).sqrt();
-                    let s = t * c;
-                    for k in 0..4 {
-                        let akp = a[k][p];
-                        let akq = a[k][q];
-                        a[k][p] = c * akp - s * akq;
-                        a[k][q] = s * akp + c * akq;
-                    }
-                    for k in 0..4 {
-                        let apk = a[p][k];
-                        let aqk = a[q][k];
-                        a[p][k] = c * apk - s * aqk;
-                        a[q][k] = s * apk + c * aqk;
-                    }
-                    for k in 0..4 {
-                        let vkp = v[k][p];
-                        let vkq = v[k][q];
-                        v[k][p] = c * vkp - s * vkq;
-                        v[k][q] = s * vkp + c * vkq;
-                    }
-                }
-            }
-        }
-        ([a[0][0], a[1][1], a[2][2], a[3][3]], v)
-    }
-
     #[test]
     fn analytic_eigensystem_matches_jacobi_on_the_hessian() {
         for energy in [Energy::Mips, Energy::SymmetricDirichlet] {
@@ -382,7 +297,7 @@ mod tests {
                         );
                     }
                 }
-                let (mut jl, _) = jacobi_eigen4(&h);
+                let (mut jl, _) = crate::linalg::small::sym_eigen(&h);
                 let mut al = lam;
                 jl.sort_by(f64::total_cmp);
                 al.sort_by(f64::total_cmp);
@@ -429,23 +344,6 @@ mod tests {
                 assert!((r[i] - a[i]).abs() < 1e-12);
             }
             assert!(s1 >= s2.abs());
-        }
-    }
-
-    #[test]
-    fn jacobi_diagonalises() {
-        let h = [
-            [4.0, 1.0, -2.0, 0.5],
-            [1.0, 3.0, 0.0, 1.0],
-            [-2.0, 0.0, -1.0, 0.3],
-            [0.5, 1.0, 0.3, 2.0],
-        ];
-        let (lam, v) = jacobi_eigen4(&h);
-        for k in 0..4 {
-            for i in 0..4 {
-                let hv: f64 = (0..4).map(|j| h[i][j] * v[j][k]).sum();
-                assert!((hv - lam[k] * v[i][k]).abs() < 1e-10, "H v = λ v fails");
-            }
         }
     }
 

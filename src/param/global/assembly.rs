@@ -10,6 +10,7 @@
 
 use sprs::CsMat;
 
+use crate::linalg::pattern::BlockPattern;
 use crate::linalg::SolveError;
 use crate::mesh::{FaceFrames, TriMesh};
 
@@ -90,15 +91,11 @@ pub fn pull_back_matrix(g: &FaceGradient, m: &[[f64; 4]; 4]) -> [[f64; 6]; 6] {
     out
 }
 
-/// The CSR pattern over interleaved UVs and, per face, where each of its 3x3 vertex blocks
-/// starts, so values are scattered without any search.
+/// The CSR pattern over interleaved UVs ([`BlockPattern`] of the triangles) with its matrix.
 pub struct Pattern {
     /// The matrix (2·#V square); its values are overwritten by [`Pattern::fill`].
     pub matrix: CsMat<f64>,
-    /// Per face, per (k, l) corner pair: index in the value array of entry (2v_k, 2v_l).
-    block: Vec<[usize; 9]>,
-    /// Per vertex, the length of its two rows (2 × its neighbours including itself).
-    row_len: Vec<usize>,
+    blocks: BlockPattern<2, 3>,
     /// Index of each diagonal entry.
     diag: Vec<usize>,
 }
@@ -107,68 +104,14 @@ impl Pattern {
     /// Builds the pattern of `mesh`: vertex blocks for every pair that shares a face.
     pub fn new(mesh: &TriMesh) -> Result<Pattern, SolveError> {
         let nv = mesh.positions.len();
-        let mut nbrs: Vec<Vec<u32>> = (0..nv as u32).map(|v| vec![v]).collect();
-        for f in &mesh.faces {
-            for &a in f {
-                for &b in f {
-                    if a != b {
-                        nbrs[a as usize].push(b);
-                    }
-                }
-            }
-        }
-        for n in &mut nbrs {
-            n.sort_unstable();
-            n.dedup();
-        }
-        let mut indptr = Vec::with_capacity(2 * nv + 1);
-        let mut indices = Vec::new();
-        let mut row_start = vec![0usize; nv];
-        indptr.push(0usize);
-        for v in 0..nv {
-            row_start[v] = indices.len();
-            for _r in 0..2 {
-                for &w in &nbrs[v] {
-                    indices.push(2 * w as usize);
-                    indices.push(2 * w as usize + 1);
-                }
-                indptr.push(indices.len());
-            }
-        }
-        let nnz = indices.len();
-        let row_len: Vec<usize> = nbrs.iter().map(|n| 2 * n.len()).collect();
-        let pos = |v: u32, w: u32| -> Result<usize, SolveError> {
-            nbrs[v as usize]
-                .binary_search(&w)
-                .map_err(|_| SolveError::InvalidInput {
-                    what: format!("vertex {w} missing from the neighbours of {v}"),
-                })
-        };
-        let mut block = Vec::with_capacity(mesh.faces.len());
-        for f in &mesh.faces {
-            let mut b = [0usize; 9];
-            for k in 0..3 {
-                for l in 0..3 {
-                    b[3 * k + l] = row_start[f[k] as usize] + 2 * pos(f[k], f[l])?;
-                }
-            }
-            block.push(b);
-        }
-        let mut diag = vec![0usize; 2 * nv];
-        for v in 0..nv {
-            let p = 2 * pos(v as u32, v as u32)?;
-            diag[2 * v] = row_start[v] + p;
-            diag[2 * v + 1] = row_start[v] + row_len[v] + p + 1;
-        }
-        let matrix = CsMat::try_new((2 * nv, 2 * nv), indptr, indices, vec![0.0; nnz]).map_err(
-            |(_, _, _, e)| SolveError::InvalidInput {
-                what: format!("sparse pattern: {e}"),
-            },
-        )?;
+        let blocks = BlockPattern::new(nv, &mesh.faces);
+        let diag = (0..2 * nv)
+            .map(|i| blocks.diag((i / 2) as u32, i % 2))
+            .collect();
+        let matrix = blocks.matrix(vec![0.0; blocks.indices.len()]);
         Ok(Pattern {
             matrix,
-            block,
-            row_len,
+            blocks,
             diag,
         })
     }
@@ -187,14 +130,13 @@ impl Pattern {
         let data = self.matrix.data_mut();
         data.fill(0.0);
         for (f, h) in local.iter().enumerate() {
-            let b = &self.block[f];
+            let slot = &self.blocks.slot[f];
             for k in 0..3 {
-                let len = self.row_len[faces[f][k] as usize];
                 for l in 0..3 {
-                    let base = b[3 * k + l];
                     for r in 0..2 {
+                        let base = self.blocks.pos(faces[f][k], r, slot[k][l], 0);
                         for s in 0..2 {
-                            data[base + r * len + s] += h[2 * k + r][2 * l + s];
+                            data[base + s] += h[2 * k + r][2 * l + s];
                         }
                     }
                 }

@@ -37,7 +37,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
-use crate::linalg::SolveError;
+use crate::linalg::{par_dot as dot, SolveError};
 use crate::mesh::{FaceFrames, TriMesh};
 use crate::param::energy::{self, Energy};
 use assembly::{face_gradients, jacobian, pull_back, pull_back_matrix, FaceGradient, Pattern};
@@ -328,10 +328,6 @@ const STALL: f64 = 1e-13;
 /// Whether a directional derivative is a (finite) descent slope; NaN is not.
 fn descends(slope: f64) -> bool {
     slope < 0.0
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    crate::linalg::ordered_sum(a.len(), |i| a[i] * b[i])
 }
 
 /// Minimises the energy of `opts` over the UVs of `mesh` from the flip-free start `uv0`.

@@ -11,7 +11,7 @@
 //! for good. `det P > 0`, so a map is flip-free w.r.t. `P` exactly when it is w.r.t. the rest.
 
 use super::assembly::FaceGradient;
-use crate::param::admm::kernels::svd2;
+use crate::linalg::small::svd2;
 use crate::param::energy::{self, Energy};
 
 /// Bisection steps for β (β to 2⁻³⁰).

@@ -14,7 +14,7 @@
 //! - MIPS, target the closest similarity `m = (σ1 + σ2)/2` (MIPS has no preferred scale):
 //!   `ω1² = (σ1 + σ2)/(σ1² σ2)`, `ω2² = (σ1 + σ2)/(σ1 σ2²)`.
 
-use crate::param::admm::kernels::svd2;
+use crate::linalg::small::svd2;
 use crate::param::energy::Energy;
 
 /// Squared proxy weights `[ω1², ω2²]` for singular values σ1 ≥ σ2 > 0.

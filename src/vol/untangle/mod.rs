@@ -22,6 +22,8 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use crate::linalg::lbfgs::{minimise, next_eps, LbfgsOptions, Objective};
+
 use super::energy::{det3, frob2, Mat3};
 use super::newton::{corners_of, jacobian, Corner};
 use crate::gpu::Context;
@@ -173,28 +175,7 @@ struct Scratch {
     device: Option<DeviceTets>,
 }
 
-impl<'a> Problem<'a> {
-    fn new(
-        tets: &'a [[u32; 4]],
-        d: Vec<Corner>,
-        w: Vec<f64>,
-        fixed: &'a [bool],
-        theta: f64,
-        protect: &'a [bool],
-    ) -> Self {
-        let (start, inc) = crate::mesh::topology::corner_incidence(fixed.len(), tets);
-        Problem {
-            tets,
-            d,
-            w,
-            fixed,
-            theta,
-            protect,
-            start,
-            inc,
-        }
-    }
-
+impl Problem<'_> {
     fn dets(&self, x: &[[f64; 3]]) -> Vec<f64> {
         (0..self.tets.len())
             .into_par_iter()
@@ -265,8 +246,45 @@ impl<'a> Problem<'a> {
     }
 }
 
-fn dotv(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+/// One ε of the untangling as an L-BFGS objective over the flattened positions: the gradient
+/// restricted to the sphere's tangent plane at the sliding vertices, trial points retracted
+/// onto it.
+struct AtEps<'a, 'p> {
+    prob: &'a Problem<'p>,
+    eps: f64,
+    sc: &'a mut Scratch,
+    sliding: &'a [usize],
+    /// The map's bounding-box diagonal: steepest steps move the largest vertex by 1e-3 of it.
+    diag: f64,
+}
+
+impl Objective for AtEps<'_, '_> {
+    type Error = VolError;
+    fn value_grad(&mut self, x: &[f64], g: &mut [f64]) -> Result<f64, VolError> {
+        let x: &[[f64; 3]] = bytemuck::cast_slice(x);
+        let e = self.prob.value_grad(x, self.eps, g, self.sc)?;
+        // Tangent part of the gradient at the sliding vertices (x on the unit sphere).
+        for &v in self.sliding {
+            let gv = [g[3 * v], g[3 * v + 1], g[3 * v + 2]];
+            let k = super::tet::dot(gv, x[v]);
+            for r in 0..3 {
+                g[3 * v + r] -= k * x[v][r];
+            }
+        }
+        Ok(e)
+    }
+    fn steepest_scale(&self, g: &[f64]) -> Option<f64> {
+        let gmax = g.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        (gmax > 0.0).then(|| 1e-3 * self.diag / gmax)
+    }
+    fn retract(&self, x: &mut [f64]) {
+        let p: &mut [[f64; 3]] = bytemuck::cast_slice_mut(x);
+        for &v in self.sliding {
+            if let Some(u) = to_unit_sphere(p[v]) {
+                p[v] = u;
+            }
+        }
+    }
 }
 
 /// Untangles `x` in place: vertices with `fixed[v]` never move. Returns the statistics; the
@@ -414,23 +432,6 @@ pub fn untangle_protected(
             ))
         })?;
     }
-    // Tangent part of the gradient at the sliding vertices (x on the unit sphere).
-    let project = |x: &[[f64; 3]], g: &mut [f64]| {
-        for &v in &sliding {
-            let gv = [g[3 * v], g[3 * v + 1], g[3 * v + 2]];
-            let k = super::tet::dot(gv, x[v]);
-            for r in 0..3 {
-                g[3 * v + r] -= k * x[v][r];
-            }
-        }
-    };
-    let retract = |p: &mut [[f64; 3]]| {
-        for &v in &sliding {
-            if let Some(u) = to_unit_sphere(p[v]) {
-                p[v] = u;
-            }
-        }
-    };
     let total: f64 = vol.iter().sum();
     // The volume term wants det J = 1, but with the boundary fixed the sum of signed volumes
     // of x is fixed too (it is the volume the boundary encloses): measure J against the rest
@@ -458,14 +459,17 @@ pub fn untangle_protected(
             .map(|(t, &p)| p && super::tet::is_positive(super::tet::det6(x, t)))
             .collect()
     };
-    let prob = Problem::new(
+    let (first, inc) = crate::mesh::topology::corner_incidence(nv, tets);
+    let prob = Problem {
         tets,
         d,
-        vol.iter().map(|v| v / total).collect(),
+        w: vol.iter().map(|v| v / total).collect(),
         fixed,
-        opts.theta,
-        &protect,
-    );
+        theta: opts.theta,
+        protect: &protect,
+        start: first,
+        inc,
+    };
     let mut sc = Scratch {
         device: match device {
             Some(ctx) => Some(DeviceTets::new(ctx, prob.tets, &prob.d, &prob.w, nv)?),
@@ -497,7 +501,6 @@ pub fn untangle_protected(
     // Step scale of the first L-BFGS step: the map's size, not the rest shape's.
     let diag = super::tet::bbox_diagonal(x);
     let trace = std::env::var_os("FOLDFREE_VOL_TRACE").is_some();
-    let n = 3 * nv;
     let min_det = |x: &[[f64; 3]]| prob.dets(x).into_iter().fold(f64::INFINITY, f64::min);
     let mut detmin = min_det(x);
     if detmin > 0.0 {
@@ -514,116 +517,30 @@ pub fn untangle_protected(
     // The paper's first ε: small when nothing is inverted, else of the order of the worst det.
     let mut eps = (1e-12 + 0.04 * detmin.min(0.0).powi(2)).sqrt();
     let mut stats = UntangleStats::default();
-    let mut g = vec![0.0; n];
-    let mut g_new = vec![0.0; n];
-    let mut dir = vec![0.0; n];
-    let mut trial = x.to_vec();
+    let lbfgs = LbfgsOptions {
+        memory: opts.history,
+        max_iterations: opts.max_inner,
+        gradient_tolerance: None,
+        rel_decrease: opts.inner_rel_tol,
+        curvature_rel: 1e-16,
+        curvature_abs: 1e-16 * f64::MIN_POSITIVE,
+    };
     for outer in 0..opts.max_outer {
         stats.outer = outer + 1;
-        let mut e = prob.value_grad(x, eps, &mut g, &mut sc)?;
-        let e_prev = e;
-        project(x, &mut g);
-        let mut s_hist: Vec<Vec<f64>> = Vec::new();
-        let mut y_hist: Vec<Vec<f64>> = Vec::new();
-        for _ in 0..opts.max_inner {
-            // Two-loop recursion: dir = −H·g.
-            dir.copy_from_slice(&g);
-            let m = s_hist.len();
-            let mut alpha = vec![0.0; m];
-            for i in (0..m).rev() {
-                let rho = 1.0 / dotv(&y_hist[i], &s_hist[i]);
-                alpha[i] = rho * dotv(&s_hist[i], &dir);
-                for (q, y) in dir.iter_mut().zip(&y_hist[i]) {
-                    *q -= alpha[i] * y;
-                }
-            }
-            let gamma = if m > 0 {
-                dotv(&s_hist[m - 1], &y_hist[m - 1]) / dotv(&y_hist[m - 1], &y_hist[m - 1])
-            } else {
-                // First step: move the largest vertex by about 1e-3 of the mesh.
-                let gmax = g.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-                if gmax > 0.0 {
-                    1e-3 * diag / gmax
-                } else {
-                    1.0
-                }
-            };
-            dir.iter_mut().for_each(|q| *q *= gamma);
-            for i in 0..m {
-                let rho = 1.0 / dotv(&y_hist[i], &s_hist[i]);
-                let beta = rho * dotv(&y_hist[i], &dir);
-                for (q, s) in dir.iter_mut().zip(&s_hist[i]) {
-                    *q += (alpha[i] - beta) * s;
-                }
-            }
-            dir.iter_mut().for_each(|q| *q = -*q);
-            let mut slope = dotv(&dir, &g);
-            if !slope.is_finite() || slope >= 0.0 {
-                // Lost curvature information: restart from steepest descent.
-                s_hist.clear();
-                y_hist.clear();
-                let gmax = g.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-                if gmax == 0.0 {
-                    break;
-                }
-                let sc = 1e-3 * diag / gmax;
-                for (q, gv) in dir.iter_mut().zip(&g) {
-                    *q = -sc * gv;
-                }
-                slope = dotv(&dir, &g);
-            }
-            let mut t = 1.0;
-            let mut accepted = None;
-            for _ in 0..40 {
-                evals += 1;
-                for v in 0..nv {
-                    for r in 0..3 {
-                        trial[v][r] = x[v][r] + t * dir[3 * v + r];
-                    }
-                }
-                retract(&mut trial);
-                let et = prob.value_grad(&trial, eps, &mut g_new, &mut sc)?;
-                project(&trial, &mut g_new);
-                if et.is_finite() && et <= e + 1e-4 * t * slope {
-                    accepted = Some(et);
-                    break;
-                }
-                t *= 0.5;
-            }
-            stats.iterations += 1;
-            let Some(et) = accepted else {
-                break;
-            };
-            // The step actually taken (the retraction shortens it on the sphere).
-            let s: Vec<f64> = (0..n)
-                .map(|i| trial[i / 3][i % 3] - x[i / 3][i % 3])
-                .collect();
-            let y: Vec<f64> = g_new.iter().zip(&g).map(|(a, b)| a - b).collect();
-            x.copy_from_slice(&trial);
-            std::mem::swap(&mut g, &mut g_new);
-            let de = e - et;
-            e = et;
-            if dotv(&s, &y) > 1e-16 * dotv(&y, &y).max(f64::MIN_POSITIVE) {
-                if s_hist.len() == opts.history {
-                    s_hist.remove(0);
-                    y_hist.remove(0);
-                }
-                s_hist.push(s);
-                y_hist.push(y);
-            }
-            if de <= opts.inner_rel_tol * e.abs() {
-                break;
-            }
-        }
+        let mut f = AtEps {
+            prob: &prob,
+            eps,
+            sc: &mut sc,
+            sliding: &sliding,
+            diag,
+        };
+        let r = minimise(&mut f, bytemuck::cast_slice_mut(x), &lbfgs)?;
+        let (e, e_prev) = (r.energy, r.initial_energy);
+        stats.iterations += r.iterations;
+        evals += r.evaluations;
         detmin = min_det(x);
         // The paper's ε update: aim for χ(detmin) to shrink by the achieved relative decrease.
-        let sigma = (1.0 - e / e_prev).max(0.1);
-        let mu = (1.0 - sigma) * chi(detmin, eps).0;
-        eps = if detmin < mu {
-            2.0 * (mu * (mu - detmin)).sqrt()
-        } else {
-            1e-10
-        };
+        eps = next_eps(e, e_prev, detmin, chi(detmin, eps).0);
         stats.energy = e;
         if trace {
             eprintln!(
