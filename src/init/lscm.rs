@@ -26,7 +26,10 @@ use super::{
     check_faces, check_input, count_flips, default_solve_options, orient_ccw, unique_edges,
     unreached, InitReport,
 };
-use crate::linalg::cg::{pcg, CgOptions, Preconditioner};
+use std::time::Instant;
+
+use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
+use crate::linalg::direct::{linear_solver, trace, CholeskySymbolic, LinearSolver};
 use crate::linalg::SolveError;
 
 /// LSCM of a disk-topology mesh with the default solver options.
@@ -179,18 +182,69 @@ pub fn lscm_pinned(
             },
             _ => *opts,
         };
-        let stats = pcg(&q, &rhs, &mut x, &opts)?;
+        let t0 = Instant::now();
+        match linear_solver() {
+            LinearSolver::Pcg => {
+                let solver = KrylovSolver::cg(&q, &opts)?;
+                let t1 = Instant::now();
+                let stats = solver.solve(&rhs, &mut x)?;
+                trace(
+                    "lscm",
+                    m,
+                    secs(t0, t1),
+                    0.0,
+                    t1.elapsed().as_secs_f64(),
+                    stats.iterations,
+                );
+                report.iterations = stats.iterations;
+                report.relative_residual = stats.relative_residual;
+                report.preconditioner = stats.preconditioner;
+            }
+            LinearSolver::Cholesky => {
+                let symbolic = CholeskySymbolic::new(&q)?;
+                let t1 = Instant::now();
+                let chol = symbolic.factor(&q)?;
+                let t2 = Instant::now();
+                chol.solve(&rhs, &mut x)?;
+                trace(
+                    "lscm",
+                    m,
+                    secs(t0, t1),
+                    secs(t1, t2),
+                    t2.elapsed().as_secs_f64(),
+                    0,
+                );
+                report.relative_residual = relative_residual(&q, &x, &rhs);
+            }
+        }
         for (r, &v) in free.iter().enumerate() {
             uv[v as usize] = [x[2 * r], x[2 * r + 1]];
         }
-        report.iterations = stats.iterations;
-        report.relative_residual = stats.relative_residual;
-        report.preconditioner = stats.preconditioner;
     }
     orient_ccw(faces, &mut uv);
     report.flips = count_flips(faces, &uv);
     report.uv = uv;
     Ok(report)
+}
+
+/// Seconds from `a` to `b`.
+fn secs(a: Instant, b: Instant) -> f64 {
+    (b - a).as_secs_f64()
+}
+
+/// ‖b − Ax‖/‖b‖ (0 when b = 0).
+pub(crate) fn relative_residual(a: &CsMat<f64>, x: &[f64], b: &[f64]) -> f64 {
+    let mut r2 = 0.0;
+    for (i, row) in a.outer_iterator().enumerate() {
+        let ax: f64 = row.iter().map(|(j, &v)| v * x[j]).sum();
+        r2 += (b[i] - ax) * (b[i] - ax);
+    }
+    let b2: f64 = b.iter().map(|v| v * v).sum();
+    if b2 > 0.0 {
+        (r2 / b2).sqrt()
+    } else {
+        0.0
+    }
 }
 
 /// The same CSR matrix without its explicitly stored zeros.

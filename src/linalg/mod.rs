@@ -4,6 +4,7 @@
 #![forbid(unsafe_code)]
 
 pub mod cg;
+pub mod direct;
 pub mod small;
 
 use rayon::prelude::*;

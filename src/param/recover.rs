@@ -6,9 +6,12 @@
 //! over the whole mesh instead of accumulating it along a tree, which is why it stays flip-free
 //! long before the breadth-first recovery does (see ../shared/notes/admm-prototype.md).
 
+use std::time::Instant;
+
 use sprs::{CsMat, TriMat};
 
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
+use crate::linalg::direct::{linear_solver, trace, Cholesky, CholeskySymbolic, LinearSolver};
 use crate::linalg::SolveError;
 use crate::param::admm::AdmmProblem;
 
@@ -20,8 +23,8 @@ pub struct LeastSquaresRecovery {
     index: Vec<u32>,
     /// The pinned vertex (fixes the translation).
     pinned: u32,
-    /// The cotangent Laplacian with its preconditioner, built once.
-    solver: KrylovSolver,
+    /// The cotangent Laplacian, factored (or with its preconditioner) once.
+    solver: Solver,
     /// #F×3 gradients of the corner hat functions in the face's frame.
     grads: Vec<[[f64; 2]; 3]>,
     /// #F face areas.
@@ -81,17 +84,47 @@ impl LeastSquaresRecovery {
             grads.push(g);
         }
         let laplacian: CsMat<f64> = tri.to_csr();
-        // Multigrid-preconditioned CG, set up once: every recovery is two warm-started solves.
-        let opts = CgOptions {
-            tolerance: 1e-10,
-            max_iterations: 20 * free.len().max(100),
-            preconditioner: Preconditioner::Amg { block_size: 1 },
+        let t0 = Instant::now();
+        let solver = match linear_solver() {
+            LinearSolver::Cholesky => {
+                let symbolic = CholeskySymbolic::new(&laplacian)?;
+                let t1 = Instant::now();
+                let chol = symbolic.factor(&laplacian)?;
+                trace(
+                    "recovery-setup",
+                    free.len(),
+                    (t1 - t0).as_secs_f64(),
+                    t1.elapsed().as_secs_f64(),
+                    0.0,
+                    0,
+                );
+                Solver::Cholesky(chol)
+            }
+            LinearSolver::Pcg => {
+                // Multigrid-preconditioned CG, set up once: every recovery is two warm-started
+                // solves.
+                let opts = CgOptions {
+                    tolerance: 1e-10,
+                    max_iterations: 20 * free.len().max(100),
+                    preconditioner: Preconditioner::Amg { block_size: 1 },
+                };
+                let s = KrylovSolver::cg(&laplacian, &opts)?;
+                trace(
+                    "recovery-setup",
+                    free.len(),
+                    t0.elapsed().as_secs_f64(),
+                    0.0,
+                    0.0,
+                    0,
+                );
+                Solver::Pcg(Box::new(s))
+            }
         };
         Ok(LeastSquaresRecovery {
             free,
             index,
             pinned,
-            solver: KrylovSolver::cg(&laplacian, &opts)?,
+            solver,
             grads,
             areas: problem.area.clone(),
             faces: faces.to_vec(),
@@ -102,6 +135,8 @@ impl LeastSquaresRecovery {
     /// is overwritten for referenced vertices; the pinned vertex keeps its value.
     pub fn recover(&self, a: &[[f64; 4]], uv: &mut [[f64; 2]]) -> Result<(), SolveError> {
         let n = self.free.len();
+        let t0 = Instant::now();
+        let mut its = 0;
         let pin = uv[self.pinned as usize];
         for r in 0..2 {
             // b_i = Σ_f area_f g_i · (row r of A_f), minus the pinned vertex's column.
@@ -126,13 +161,23 @@ impl LeastSquaresRecovery {
                 }
             }
             let mut x: Vec<f64> = self.free.iter().map(|&v| uv[v as usize][r]).collect();
-            self.solver.solve(&b, &mut x)?;
+            match &self.solver {
+                Solver::Pcg(s) => its += s.solve(&b, &mut x)?.iterations,
+                Solver::Cholesky(c) => c.solve(&b, &mut x)?,
+            }
             for (k, &v) in self.free.iter().enumerate() {
                 uv[v as usize][r] = x[k];
             }
         }
+        trace("recovery", n, 0.0, 0.0, t0.elapsed().as_secs_f64(), its);
         Ok(())
     }
+}
+
+/// The linear solver of [`LeastSquaresRecovery`].
+enum Solver {
+    Pcg(Box<KrylovSolver>),
+    Cholesky(Cholesky),
 }
 
 /// How per-vertex UVs are recovered from the per-face maps.

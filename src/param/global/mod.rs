@@ -37,6 +37,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
+use crate::linalg::direct::{linear_solver, trace, CholeskySymbolic, LinearSolver};
 use crate::linalg::SolveError;
 use crate::mesh::{FaceFrames, TriMesh};
 use crate::param::energy::{self, Energy};
@@ -372,6 +373,8 @@ pub fn solve(
         });
     }
     let mut pattern = Pattern::new(mesh)?;
+    // Sparse Cholesky's ordering and symbolic factorisation of the pattern, on first use.
+    let mut symbolic: Option<CholeskySymbolic> = None;
     let mut history = Vec::new();
     let mut totals = PhaseTotals::default();
     let mut phase = Phase::Proxy;
@@ -444,6 +447,7 @@ pub fn solve(
                 &g,
                 used,
                 &mut pattern,
+                &mut symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -474,6 +478,7 @@ pub fn solve(
                 &g,
                 used,
                 &mut pattern,
+                &mut symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -490,6 +495,7 @@ pub fn solve(
                 &g,
                 Phase::Proxy,
                 &mut pattern,
+                &mut symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -512,6 +518,7 @@ pub fn solve(
                 &g,
                 Phase::Proxy,
                 &mut pattern,
+                &mut symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -639,6 +646,7 @@ fn direction(
     g: &[f64],
     phase: Phase,
     pattern: &mut Pattern,
+    symbolic: &mut Option<CholeskySymbolic>,
     opts: &GlobalOptions,
     forcing: f64,
     d: &mut [f64],
@@ -659,6 +667,36 @@ fn direction(
         })
         .collect();
     pattern.fill(problem.faces, &local, REL_SHIFT);
+    let rhs: Vec<f64> = g.iter().map(|v| -v).collect();
+    if linear_solver() == LinearSolver::Cholesky {
+        let t0 = Instant::now();
+        if symbolic.is_none() {
+            *symbolic = Some(CholeskySymbolic::new(&pattern.matrix)?);
+        }
+        let t1 = Instant::now();
+        // Not positive definite (an exact Hessian away from a minimum): `SolveError::Failed`,
+        // which the caller treats like CG's negative curvature.
+        let chol = symbolic
+            .as_ref()
+            .expect("set above")
+            .factor(&pattern.matrix)?;
+        let t2 = Instant::now();
+        chol.solve(&rhs, d)?;
+        trace(
+            match phase {
+                Phase::Proxy => "global-proxy",
+                Phase::Newton => "global-newton",
+                Phase::ExactNewton => "global-exact",
+            },
+            rhs.len(),
+            (t1 - t0).as_secs_f64(),
+            (t2 - t1).as_secs_f64(),
+            t2.elapsed().as_secs_f64(),
+            0,
+        );
+        return Ok((dot(g, d), 0));
+    }
+    let t0 = Instant::now();
     let cg = CgOptions {
         tolerance: match phase {
             Phase::Proxy => opts.cg_tol_proxy,
@@ -671,13 +709,25 @@ fn direction(
         preconditioner: opts.preconditioner,
     };
     let solver = KrylovSolver::cg(&pattern.matrix, &cg)?;
-    let rhs: Vec<f64> = g.iter().map(|v| -v).collect();
+    let t1 = Instant::now();
     d.fill(0.0);
     let iterations = match solver.solve(&rhs, d) {
         Ok(stats) => stats.iterations,
         Err(SolveError::CgNoConvergence { iterations, .. }) => iterations,
         Err(e) => return Err(e),
     };
+    trace(
+        match phase {
+            Phase::Proxy => "global-proxy",
+            Phase::Newton => "global-newton",
+            Phase::ExactNewton => "global-exact",
+        },
+        rhs.len(),
+        (t1 - t0).as_secs_f64(),
+        0.0,
+        t1.elapsed().as_secs_f64(),
+        iterations,
+    );
     if d.iter().any(|v| !v.is_finite()) {
         return Err(SolveError::NonFinite {
             what: "global solver search direction".into(),
