@@ -211,34 +211,17 @@ impl Cholesky {
     }
 }
 
-/// Which linear solver the callers use (issue 26's measurement switch): the environment
-/// variable `FOLDFREE_LINSOLVE` = `pcg` | `cholesky`, read once; Cholesky when unset.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which linear solver a caller uses for its SPD systems. The sparse Cholesky is the default
+/// wherever it was measured faster end to end (BENCHMARKS.md, issue 26); preconditioned CG
+/// stays selectable for comparisons.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum LinearSolver {
+    /// Krylov ([`super::cg`]) with the caller's preconditioner and tolerance.
     Pcg,
+    /// [`Cholesky`]: exact up to rounding, symbolic analysis reused per pattern.
+    #[default]
     Cholesky,
-}
-
-/// The process-wide [`LinearSolver`] (see there).
-pub fn linear_solver() -> LinearSolver {
-    static CHOICE: std::sync::OnceLock<LinearSolver> = std::sync::OnceLock::new();
-    *CHOICE.get_or_init(|| match std::env::var("FOLDFREE_LINSOLVE").as_deref() {
-        Ok("pcg") => LinearSolver::Pcg,
-        _ => LinearSolver::Cholesky,
-    })
-}
-
-/// Prints one solve's timings to stderr when `FOLDFREE_LINSOLVE_TRACE` is set (measurement).
-/// `setup`: symbolic analysis (Cholesky) or preconditioner construction (PCG) in seconds,
-/// `factor`: numeric factorisation, `solve`: the solve(s), `iterations`: CG iterations.
-pub fn trace(user: &str, n: usize, setup: f64, factor: f64, solve: f64, iterations: usize) {
-    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    if *ON.get_or_init(|| std::env::var_os("FOLDFREE_LINSOLVE_TRACE").is_some()) {
-        eprintln!(
-            "linsolve {user} {:?} n={n} setup={setup:.4} factor={factor:.4} solve={solve:.4} its={iterations}",
-            linear_solver()
-        );
-    }
 }
 
 #[cfg(test)]

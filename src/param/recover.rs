@@ -1,17 +1,15 @@
 //! Recovering per-vertex UVs from per-face Jacobians.
 //!
 //! Least squares (the default): `min_u Σ_f area_f ‖J_f(u) − A_f‖²`, a Poisson problem whose
-//! matrix (the cotangent Laplacian) depends only on the mesh, so it is assembled once and every
-//! recovery is two warm-started PCG solves. It spreads the consensus error of the per-face maps
-//! over the whole mesh instead of accumulating it along a tree, which is why it stays flip-free
-//! long before the breadth-first recovery does (see ../shared/notes/admm-prototype.md).
-
-use std::time::Instant;
+//! matrix (the cotangent Laplacian) depends only on the mesh, so it is assembled and factored
+//! (sparse Cholesky) once and every recovery is two pairs of triangular solves. It spreads the
+//! consensus error of the per-face maps over the whole mesh instead of accumulating it along a
+//! tree, which is why it stays flip-free long before the breadth-first recovery does (see ../shared/notes/admm-prototype.md).
 
 use sprs::{CsMat, TriMat};
 
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
-use crate::linalg::direct::{linear_solver, trace, Cholesky, CholeskySymbolic, LinearSolver};
+use crate::linalg::direct::{Cholesky, DirectError};
 use crate::linalg::SolveError;
 use crate::param::admm::AdmmProblem;
 
@@ -84,41 +82,21 @@ impl LeastSquaresRecovery {
             grads.push(g);
         }
         let laplacian: CsMat<f64> = tri.to_csr();
-        let t0 = Instant::now();
-        let solver = match linear_solver() {
-            LinearSolver::Cholesky => {
-                let symbolic = CholeskySymbolic::new(&laplacian)?;
-                let t1 = Instant::now();
-                let chol = symbolic.factor(&laplacian)?;
-                trace(
-                    "recovery-setup",
-                    free.len(),
-                    (t1 - t0).as_secs_f64(),
-                    t1.elapsed().as_secs_f64(),
-                    0.0,
-                    0,
-                );
-                Solver::Cholesky(chol)
-            }
-            LinearSolver::Pcg => {
-                // Multigrid-preconditioned CG, set up once: every recovery is two warm-started
-                // solves.
+        // Factored once: every recovery is then two triangular solve pairs, exact, ~20–70×
+        // faster than the warm-started multigrid CG it replaced (BENCHMARKS.md, issue 26).
+        // A Laplacian that is not positive definite (faces in several components, only one
+        // of them pinned) falls back to that CG, which still converges on a consistent system.
+        let solver = match Cholesky::new(&laplacian) {
+            Ok(c) => Solver::Cholesky(c),
+            Err(DirectError::NotPositiveDefinite { .. }) => {
                 let opts = CgOptions {
                     tolerance: 1e-10,
                     max_iterations: 20 * free.len().max(100),
                     preconditioner: Preconditioner::Amg { block_size: 1 },
                 };
-                let s = KrylovSolver::cg(&laplacian, &opts)?;
-                trace(
-                    "recovery-setup",
-                    free.len(),
-                    t0.elapsed().as_secs_f64(),
-                    0.0,
-                    0.0,
-                    0,
-                );
-                Solver::Pcg(Box::new(s))
+                Solver::Pcg(Box::new(KrylovSolver::cg(&laplacian, &opts)?))
             }
+            Err(e) => return Err(e.into()),
         };
         Ok(LeastSquaresRecovery {
             free,
@@ -131,12 +109,11 @@ impl LeastSquaresRecovery {
         })
     }
 
-    /// Recovers UVs from the Jacobians `a` (#F, row-major 2x2). `uv` (#V) is the warm start and
-    /// is overwritten for referenced vertices; the pinned vertex keeps its value.
+    /// Recovers UVs from the Jacobians `a` (#F, row-major 2x2). `uv` (#V) is overwritten for
+    /// referenced vertices (its values are the warm start of the CG fallback); the pinned
+    /// vertex keeps its value.
     pub fn recover(&self, a: &[[f64; 4]], uv: &mut [[f64; 2]]) -> Result<(), SolveError> {
         let n = self.free.len();
-        let t0 = Instant::now();
-        let mut its = 0;
         let pin = uv[self.pinned as usize];
         for r in 0..2 {
             // b_i = Σ_f area_f g_i · (row r of A_f), minus the pinned vertex's column.
@@ -162,19 +139,21 @@ impl LeastSquaresRecovery {
             }
             let mut x: Vec<f64> = self.free.iter().map(|&v| uv[v as usize][r]).collect();
             match &self.solver {
-                Solver::Pcg(s) => its += s.solve(&b, &mut x)?.iterations,
+                Solver::Pcg(s) => {
+                    s.solve(&b, &mut x)?;
+                }
                 Solver::Cholesky(c) => c.solve(&b, &mut x)?,
             }
             for (k, &v) in self.free.iter().enumerate() {
                 uv[v as usize][r] = x[k];
             }
         }
-        trace("recovery", n, 0.0, 0.0, t0.elapsed().as_secs_f64(), its);
         Ok(())
     }
 }
 
-/// The linear solver of [`LeastSquaresRecovery`].
+/// The linear solver of [`LeastSquaresRecovery`]: the factor, or CG where the Laplacian is
+/// only semi-definite.
 enum Solver {
     Pcg(Box<KrylovSolver>),
     Cholesky(Cholesky),

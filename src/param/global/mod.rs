@@ -9,8 +9,9 @@
 //! it by the largest flip-free step ([`line_search`]) with Armijo backtracking, so every
 //! iterate is foldover-free and the objective decreases monotonically. While some faces are
 //! over the distortion bound, the objective is taken w.r.t. progressive reference triangles
-//! ([`progressive`]). Systems share one CSR pattern ([`assembly`]) and are solved by
-//! preconditioned CG ([`crate::linalg::cg::KrylovSolver`]).
+//! ([`progressive`]). Systems share one CSR pattern ([`assembly`]) and are solved by sparse
+//! Cholesky, its symbolic analysis computed once ([`crate::linalg::direct`]), or by
+//! preconditioned CG ([`crate::linalg::cg::KrylovSolver`], [`GlobalOptions::linear_solver`]).
 //!
 //! Converged when the energy has stopped decreasing: its relative decrease per iteration over
 //! the last [`GlobalOptions::energy_window`] iterations is under [`GlobalOptions::energy_tol`]
@@ -37,7 +38,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
-use crate::linalg::direct::{linear_solver, trace, CholeskySymbolic, LinearSolver};
+use crate::linalg::direct::{CholeskySymbolic, DirectError, LinearSolver};
 use crate::linalg::SolveError;
 use crate::mesh::{FaceFrames, TriMesh};
 use crate::param::energy::{self, Energy};
@@ -79,6 +80,10 @@ pub struct GlobalOptions {
     /// Iterations after which progressive references are dropped even if some faces are
     /// still over the bound.
     pub progressive_max_iters: usize,
+    /// Linear solver of the proxy and Newton systems: sparse Cholesky (the default: the
+    /// symbolic analysis once per solve, a numeric factorisation per iteration; 3–9× faster end
+    /// to end than multigrid CG, BENCHMARKS.md issue 26) or PCG with the options below.
+    pub linear_solver: LinearSolver,
     /// Preconditioner of the CG solves.
     pub preconditioner: Preconditioner,
     /// Relative CG tolerance in the proxy phase (a direction only needs to be rough).
@@ -112,6 +117,7 @@ impl GlobalOptions {
                 Energy::Mips => 20.0,
             }),
             progressive_max_iters: 30,
+            linear_solver: LinearSolver::default(),
             preconditioner: Preconditioner::Amg { block_size: 2 },
             cg_tol_proxy: 1e-2,
             cg_tol_newton: 1e-8,
@@ -668,35 +674,31 @@ fn direction(
         .collect();
     pattern.fill(problem.faces, &local, REL_SHIFT);
     let rhs: Vec<f64> = g.iter().map(|v| -v).collect();
-    if linear_solver() == LinearSolver::Cholesky {
-        let t0 = Instant::now();
+    if opts.linear_solver == LinearSolver::Cholesky {
         if symbolic.is_none() {
             *symbolic = Some(CholeskySymbolic::new(&pattern.matrix)?);
         }
-        let t1 = Instant::now();
-        // Not positive definite (an exact Hessian away from a minimum): `SolveError::Failed`,
-        // which the caller treats like CG's negative curvature.
-        let chol = symbolic
-            .as_ref()
-            .expect("set above")
-            .factor(&pattern.matrix)?;
-        let t2 = Instant::now();
-        chol.solve(&rhs, d)?;
-        trace(
-            match phase {
-                Phase::Proxy => "global-proxy",
-                Phase::Newton => "global-newton",
-                Phase::ExactNewton => "global-exact",
-            },
-            rhs.len(),
-            (t1 - t0).as_secs_f64(),
-            (t2 - t1).as_secs_f64(),
-            t2.elapsed().as_secs_f64(),
-            0,
-        );
-        return Ok((dot(g, d), 0));
+        let factor = symbolic.as_ref().map(|s| s.factor(&pattern.matrix));
+        match factor {
+            Some(Ok(chol)) => {
+                chol.solve(&rhs, d)?;
+                return Ok((dot(g, d), 0));
+            }
+            // An exact Hessian away from a minimum: `SolveError::Failed`, which the caller
+            // treats like CG's negative curvature.
+            Some(Err(e @ DirectError::NotPositiveDefinite { .. }))
+                if phase == Phase::ExactNewton =>
+            {
+                return Err(e.into())
+            }
+            // The proxy and projected Hessians are positive definite up to the diagonal shift;
+            // should rounding still break the factorisation, CG below gets the step.
+            Some(Err(DirectError::NotPositiveDefinite { .. })) => {}
+            Some(Err(e)) => return Err(e.into()),
+            // Set above.
+            None => {}
+        }
     }
-    let t0 = Instant::now();
     let cg = CgOptions {
         tolerance: match phase {
             Phase::Proxy => opts.cg_tol_proxy,
@@ -709,25 +711,12 @@ fn direction(
         preconditioner: opts.preconditioner,
     };
     let solver = KrylovSolver::cg(&pattern.matrix, &cg)?;
-    let t1 = Instant::now();
     d.fill(0.0);
     let iterations = match solver.solve(&rhs, d) {
         Ok(stats) => stats.iterations,
         Err(SolveError::CgNoConvergence { iterations, .. }) => iterations,
         Err(e) => return Err(e),
     };
-    trace(
-        match phase {
-            Phase::Proxy => "global-proxy",
-            Phase::Newton => "global-newton",
-            Phase::ExactNewton => "global-exact",
-        },
-        rhs.len(),
-        (t1 - t0).as_secs_f64(),
-        0.0,
-        t1.elapsed().as_secs_f64(),
-        iterations,
-    );
     if d.iter().any(|v| !v.is_finite()) {
         return Err(SolveError::NonFinite {
             what: "global solver search direction".into(),
