@@ -2,10 +2,10 @@
 //!
 //! Why a direct solver next to the preconditioned CG of [`super::cg`]: the systems of the
 //! surface solvers are 2D-mesh Laplacians and Hessians (planar graphs), whose Cholesky factor
-//! after a fill-reducing ordering (AMD) has only O(n log n) entries, and the systems come in
-//! families that share one sparsity pattern: one Laplacian for every least-squares recovery of
-//! an ADMM run, one pattern for every proxy and Newton system of the global solver, two UV
-//! columns per Tutte map. The ordering and the symbolic factorisation ([`CholeskySymbolic`])
+//! stays sparse under a fill-reducing ordering (AMD here; O(n log n) entries under nested
+//! dissection), and the systems come in families that share one sparsity pattern: one
+//! Laplacian for every least-squares recovery of an ADMM run, one pattern for every proxy and
+//! Newton system of the global solver, two UV columns per Tutte map. The ordering and the symbolic factorisation ([`CholeskySymbolic`])
 //! are computed once per pattern; each matrix then costs one numeric factorisation
 //! ([`CholeskySymbolic::factor`]) and each right-hand side two triangular solves
 //! ([`Cholesky::solve`]), with an exact answer instead of an iteration count that grows with
@@ -15,6 +15,9 @@
 //! A matrix that is not positive definite (an indefinite exact Hessian, a singular system)
 //! fails the numeric factorisation with [`DirectError::NotPositiveDefinite`]; the callers
 //! treat it as CG treats negative curvature (fall back or report).
+//!
+//! faer is built without its `rayon` feature: the factorisation runs on one thread, so its
+//! result, like the rest of the CPU path, does not depend on the thread count.
 #![forbid(unsafe_code)]
 
 use faer::linalg::solvers::Solve;

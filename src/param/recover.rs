@@ -4,7 +4,8 @@
 //! matrix (the cotangent Laplacian) depends only on the mesh, so it is assembled and factored
 //! (sparse Cholesky) once and every recovery is two pairs of triangular solves. It spreads the
 //! consensus error of the per-face maps over the whole mesh instead of accumulating it along a
-//! tree, which is why it stays flip-free long before the breadth-first recovery does (see ../shared/notes/admm-prototype.md).
+//! tree, which is why it stays flip-free long before the breadth-first recovery does (see
+//! ../shared/notes/admm-prototype.md).
 
 use sprs::{CsMat, TriMat};
 
@@ -82,8 +83,8 @@ impl LeastSquaresRecovery {
             grads.push(g);
         }
         let laplacian: CsMat<f64> = tri.to_csr();
-        // Factored once: every recovery is then two triangular solve pairs, exact, ~20–70×
-        // faster than the warm-started multigrid CG it replaced (BENCHMARKS.md, issue 26).
+        // Factored once: every recovery is then two triangular solve pairs, exact, 7–80× faster
+        // than the warm-started multigrid CG it replaced (BENCHMARKS.md, issue 26).
         // A Laplacian that is not positive definite (faces in several components, only one
         // of them pinned) falls back to that CG, which still converges on a consistent system.
         let solver = match Cholesky::new(&laplacian) {

@@ -81,7 +81,7 @@ pub struct GlobalOptions {
     /// still over the bound.
     pub progressive_max_iters: usize,
     /// Linear solver of the proxy and Newton systems: sparse Cholesky (the default: the
-    /// symbolic analysis once per solve, a numeric factorisation per iteration; 3–9× faster end
+    /// symbolic analysis once per solve, a numeric factorisation per iteration; 3–8× faster end
     /// to end than multigrid CG, BENCHMARKS.md issue 26) or PCG with the options below.
     pub linear_solver: LinearSolver,
     /// Preconditioner of the CG solves.
