@@ -2,7 +2,7 @@
 //! prints its per-iteration history and the `metrics::evaluate` scores (used for the
 //! BENCHMARKS.md section of `--solver global`).
 //!
-//! `cargo run --release --example global_solve -- MESH.obj [sd|mips] [--pre jacobi|ic0|amg]
+//! `cargo run --release --example global_solve -- MESH.obj [sd|mips] [--pcg] [--pre jacobi|ic0|amg]
 //!  [--cap X|none] [--no-exact] [--proxy-switch R] [--cg-proxy T] [--cg-newton T] [--max-iters N] [--lscm] [--mvc] [-q]
 //!  [--ttq TARGET]`
 //!
@@ -13,6 +13,7 @@
 use foldfree::init::tutte::TutteWeights;
 use foldfree::init::{initial_map, normalize_area, InitMethod};
 use foldfree::linalg::cg::Preconditioner;
+use foldfree::linalg::direct::LinearSolver;
 use foldfree::mesh;
 use foldfree::param::global::{self, GlobalOptions};
 use foldfree::param::Energy;
@@ -36,6 +37,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     while let Some(a) = it.next() {
         let mut val = || it.next().ok_or(format!("{a} needs a value"));
         match a.as_str() {
+            // PCG instead of the sparse Cholesky, with the preconditioner of `--pre`.
+            "--pcg" => opts.linear_solver = LinearSolver::Pcg,
             "--pre" => {
                 opts.preconditioner = match val()?.as_str() {
                     "jacobi" => Preconditioner::Jacobi,

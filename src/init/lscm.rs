@@ -7,11 +7,13 @@
 //! zero exactly on similarities of a planar mesh, and quadratic: E_C = ½ xᵀQx with Q the
 //! 2V×2V symmetric matrix [[L, −B], [B, L]] (L the cotangent Laplacian, B the antisymmetric
 //! boundary-area form). Two pinned vertices remove the similarity null space; the rest is the
-//! SPD system Q_ff x_f = −Q_fp x_p, solved by CG with u and v of each vertex interleaved
-//! (2i, 2i+1), preconditioned by multigrid that aggregates the pair as one node (block size
-//! 2). Its iteration count still grows with the boundary (the near-null space of the
-//! conformal energy is every holomorphic map, not just constants): ~200 iterations, ~10 s
-//! at 125k vertices, against ~20 for Tutte.
+//! SPD system Q_ff x_f = −Q_fp x_p over u and v of each vertex interleaved (2i, 2i+1).
+//! [`lscm`] solves it by sparse Cholesky ([`crate::linalg::direct`]); [`lscm_report`] and
+//! [`lscm_pinned`] by CG with the given options (multigrid aggregating the pair as one node,
+//! block size 2), whose iteration count grows with the boundary (the near-null space of the
+//! conformal energy is every holomorphic map, not just constants): ~200 iterations at 125k
+//! vertices, against ~20 for Tutte. The factorisation is several times faster on the corpus
+//! and igea (BENCHMARKS.md, issue 26).
 //!
 //! The area term is assembled per face (Σ over each triangle's directed edges); interior
 //! edges cancel exactly, so holes need no special care. This is the start point of the ADMM
@@ -27,9 +29,10 @@ use super::{
     unreached, InitReport,
 };
 use crate::linalg::cg::{pcg, CgOptions, Preconditioner};
+use crate::linalg::direct::{Cholesky, LinearSolver};
 use crate::linalg::SolveError;
 
-/// LSCM of a disk-topology mesh with the default solver options.
+/// LSCM of a disk-topology mesh, solved by sparse Cholesky.
 ///
 /// `positions`: #V×3; `faces`: #F×3, counter-clockwise; `boundary`: the boundary loop (used to
 /// choose the two pins: the boundary vertex farthest from `boundary[0]`, then the one farthest
@@ -41,7 +44,15 @@ pub fn lscm(
     faces: &[[u32; 3]],
     boundary: &[u32],
 ) -> Result<Vec<[f64; 2]>, SolveError> {
-    lscm_report(positions, faces, boundary, &default_solve_options()).map(|r| r.uv)
+    check_input(positions, faces, boundary)?;
+    lscm_solve(
+        positions,
+        faces,
+        lscm_pins(positions, boundary),
+        LinearSolver::Cholesky,
+        &default_solve_options(),
+    )
+    .map(|r| r.uv)
 }
 
 /// The two pinned vertices: the boundary vertex farthest (in 3D) from `boundary[0]`, then the
@@ -62,7 +73,8 @@ pub fn lscm_pins(positions: &[[f64; 3]], boundary: &[u32]) -> [u32; 2] {
     [a, farthest(a)]
 }
 
-/// [`lscm`] with explicit solver options, also returning the flip count and solve statistics.
+/// [`lscm`] solved by preconditioned CG with explicit options, also returning the flip count
+/// and solve statistics.
 pub fn lscm_report(
     positions: &[[f64; 3]],
     faces: &[[u32; 3]],
@@ -75,10 +87,22 @@ pub fn lscm_report(
 
 /// LSCM with the two pinned vertices given (`pins[0]` goes to (0, 0), `pins[1]` to (d, 0)).
 /// Pins need not lie on the boundary, but boundary pins give the least distorted maps.
+/// Solved by preconditioned CG with `opts`.
 pub fn lscm_pinned(
     positions: &[[f64; 3]],
     faces: &[[u32; 3]],
     pins: [u32; 2],
+    opts: &CgOptions,
+) -> Result<InitReport, SolveError> {
+    lscm_solve(positions, faces, pins, LinearSolver::Pcg, opts)
+}
+
+/// [`lscm_pinned`] with the linear solver chosen (`opts` only matter for PCG).
+fn lscm_solve(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    pins: [u32; 2],
+    solver: LinearSolver,
     opts: &CgOptions,
 ) -> Result<InitReport, SolveError> {
     let n = positions.len();
@@ -179,18 +203,41 @@ pub fn lscm_pinned(
             },
             _ => *opts,
         };
-        let stats = pcg(&q, &rhs, &mut x, &opts)?;
+        match solver {
+            LinearSolver::Pcg => {
+                let stats = pcg(&q, &rhs, &mut x, &opts)?;
+                report.iterations = stats.iterations;
+                report.relative_residual = stats.relative_residual;
+                report.preconditioner = stats.preconditioner;
+            }
+            LinearSolver::Cholesky => {
+                Cholesky::new(&q)?.solve(&rhs, &mut x)?;
+                report.relative_residual = relative_residual(&q, &x, &rhs);
+            }
+        }
         for (r, &v) in free.iter().enumerate() {
             uv[v as usize] = [x[2 * r], x[2 * r + 1]];
         }
-        report.iterations = stats.iterations;
-        report.relative_residual = stats.relative_residual;
-        report.preconditioner = stats.preconditioner;
     }
     orient_ccw(faces, &mut uv);
     report.flips = count_flips(faces, &uv);
     report.uv = uv;
     Ok(report)
+}
+
+/// ‖b − Ax‖/‖b‖ (0 when b = 0).
+pub(crate) fn relative_residual(a: &CsMat<f64>, x: &[f64], b: &[f64]) -> f64 {
+    let mut r2 = 0.0;
+    for (i, row) in a.outer_iterator().enumerate() {
+        let ax: f64 = row.iter().map(|(j, &v)| v * x[j]).sum();
+        r2 += (b[i] - ax) * (b[i] - ax);
+    }
+    let b2: f64 = b.iter().map(|v| v * v).sum();
+    if b2 > 0.0 {
+        (r2 / b2).sqrt()
+    } else {
+        0.0
+    }
 }
 
 /// The same CSR matrix without its explicitly stored zeros.
@@ -211,4 +258,42 @@ fn drop_zeros(a: &CsMat<f64>) -> CsMat<f64> {
     // Rows of a CSR matrix keep their sorted, in-range columns when entries are removed, so
     // the structure stays valid and `new` cannot fail.
     CsMat::new(a.shape(), indptr, indices, data)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bumpy 12x12 grid: Cholesky and multigrid CG give the same map.
+    #[test]
+    fn cholesky_and_pcg_agree() {
+        let k = 12;
+        let mut p = Vec::new();
+        for j in 0..=k {
+            for i in 0..=k {
+                let (x, y) = (i as f64 / k as f64, j as f64 / k as f64);
+                p.push([x, y, 0.3 * (3.0 * x).sin() * (2.0 * y).cos()]);
+            }
+        }
+        let mut f = Vec::new();
+        let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
+        for j in 0..k {
+            for i in 0..k {
+                f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let pins = [id(0, 0), id(k, k)];
+        let opts = default_solve_options();
+        let a = lscm_solve(&p, &f, pins, LinearSolver::Cholesky, &opts).unwrap();
+        let b = lscm_solve(&p, &f, pins, LinearSolver::Pcg, &opts).unwrap();
+        assert_eq!(a.flips, 0);
+        assert!(a.relative_residual < 1e-12, "{}", a.relative_residual);
+        let diff =
+            a.uv.iter()
+                .zip(&b.uv)
+                .flat_map(|(x, y)| [x[0] - y[0], x[1] - y[1]])
+                .fold(0.0f64, |m, d| m.max(d.abs()));
+        assert!(diff < 1e-9, "{diff}");
+    }
 }

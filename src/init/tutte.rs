@@ -13,9 +13,11 @@
 //! Solvers: uniform weights give the graph Laplacian restricted to the interior (symmetric
 //! positive definite, boundary moved to the right-hand side): CG. Mean-value weights are not
 //! symmetric: each row is normalised to a convex combination (u_i − Σ_j λ_ij u_j = 0,
-//! Σ_j λ_ij = 1), a diagonally dominant M-matrix: BiCGSTAB. Both are preconditioned by
-//! algebraic multigrid by default (about 20 iterations at 125k interior vertices, ~1 s in
-//! release), and both UV columns share the matrix and are solved in parallel.
+//! Σ_j λ_ij = 1), a diagonally dominant M-matrix: BiCGSTAB. [`tutte`] factors the uniform
+//! system by sparse Cholesky ([`crate::linalg::direct`], both UV columns in one solve; faster
+//! than CG on the corpus and igea, BENCHMARKS.md issue 26); [`tutte_report`] and the
+//! mean-value system use the Krylov solvers, preconditioned by algebraic multigrid by default
+//! (about 20 iterations at 125k interior vertices), both UV columns solved in parallel.
 #![forbid(unsafe_code)]
 
 use sprs::TriMat;
@@ -26,6 +28,7 @@ use super::{
     InitReport,
 };
 use crate::linalg::cg::{bicgstab_multi, pcg_multi, CgOptions};
+use crate::linalg::direct::{Cholesky, LinearSolver};
 use crate::linalg::SolveError;
 
 /// Edge weights of the Tutte embedding.
@@ -39,7 +42,8 @@ pub enum TutteWeights {
     MeanValue,
 }
 
-/// Tutte embedding of a disk-topology mesh with the default solver options.
+/// Tutte embedding of a disk-topology mesh: uniform weights by sparse Cholesky, mean-value
+/// weights by BiCGSTAB with the default options.
 ///
 /// `positions`: #V×3; `faces`: #F×3, counter-clockwise; `boundary`: the boundary loop as an
 /// ordered vertex cycle in the direction the faces traverse it. Returns #V×2 UVs; the
@@ -50,23 +54,37 @@ pub fn tutte(
     boundary: &[u32],
     weights: TutteWeights,
 ) -> Result<Vec<[f64; 2]>, SolveError> {
-    tutte_report(
+    tutte_solve(
         positions,
         faces,
         boundary,
         weights,
+        LinearSolver::Cholesky,
         &default_solve_options(),
     )
     .map(|r| r.uv)
 }
 
 /// [`tutte`] with explicit solver options, also returning the flip count and solve statistics
-/// (flips can only come from round-off, degenerate input or a non-disk mesh).
+/// (flips can only come from round-off, degenerate input or a non-disk mesh). Solved by the
+/// Krylov solvers (CG, BiCGSTAB for mean-value weights) with `opts`.
 pub fn tutte_report(
     positions: &[[f64; 3]],
     faces: &[[u32; 3]],
     boundary: &[u32],
     weights: TutteWeights,
+    opts: &CgOptions,
+) -> Result<InitReport, SolveError> {
+    tutte_solve(positions, faces, boundary, weights, LinearSolver::Pcg, opts)
+}
+
+/// [`tutte_report`] with the solver of the uniform (symmetric) system chosen.
+fn tutte_solve(
+    positions: &[[f64; 3]],
+    faces: &[[u32; 3]],
+    boundary: &[u32],
+    weights: TutteWeights,
+    solver: LinearSolver,
     opts: &CgOptions,
 ) -> Result<InitReport, SolveError> {
     let n = positions.len();
@@ -146,21 +164,33 @@ pub fn tutte_report(
         }
         let a = tri.to_csr();
         let mut x = vec![vec![0.0; m]; 2];
-        let stats = match weights {
-            TutteWeights::Uniform => pcg_multi(&a, &rhs, &mut x, opts)?,
-            TutteWeights::MeanValue => bicgstab_multi(&a, &rhs, &mut x, opts)?,
-        };
+        if weights == TutteWeights::Uniform && solver == LinearSolver::Cholesky {
+            // Symmetric positive definite: one factorisation, both UV columns in one solve.
+            let mut both: Vec<f64> = rhs.concat();
+            Cholesky::new(&a)?.solve_many_in_place(&mut both, 2)?;
+            for c in 0..2 {
+                x[c].copy_from_slice(&both[c * m..(c + 1) * m]);
+                report.relative_residual = report
+                    .relative_residual
+                    .max(super::lscm::relative_residual(&a, &x[c], &rhs[c]));
+            }
+        } else {
+            let stats = match weights {
+                TutteWeights::Uniform => pcg_multi(&a, &rhs, &mut x, opts)?,
+                TutteWeights::MeanValue => bicgstab_multi(&a, &rhs, &mut x, opts)?,
+            };
+            report.iterations = stats.iter().map(|s| s.iterations).max().unwrap_or(0);
+            report.relative_residual = stats
+                .iter()
+                .map(|s| s.relative_residual)
+                .fold(0.0, f64::max);
+            report.preconditioner = stats
+                .first()
+                .map_or(opts.preconditioner, |s| s.preconditioner);
+        }
         for (r, &v) in interior.iter().enumerate() {
             uv[v as usize] = [x[0][r], x[1][r]];
         }
-        report.iterations = stats.iter().map(|s| s.iterations).max().unwrap_or(0);
-        report.relative_residual = stats
-            .iter()
-            .map(|s| s.relative_residual)
-            .fold(0.0, f64::max);
-        report.preconditioner = stats
-            .first()
-            .map_or(opts.preconditioner, |s| s.preconditioner);
     }
     orient_ccw(faces, &mut uv);
     report.flips = count_flips(faces, &uv);
@@ -261,4 +291,55 @@ fn mean_value_corner_weights(
         }
     }
     (row_sum, corner_w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bumpy disk-like grid: Cholesky and multigrid CG give the same uniform Tutte map.
+    #[test]
+    fn cholesky_and_pcg_agree() {
+        let k = 10;
+        let mut p = Vec::new();
+        for j in 0..=k {
+            for i in 0..=k {
+                let (x, y) = (i as f64 / k as f64, j as f64 / k as f64);
+                p.push([x, y, 0.2 * (4.0 * x * y).sin()]);
+            }
+        }
+        let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
+        let mut f = Vec::new();
+        for j in 0..k {
+            for i in 0..k {
+                f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        // Counter-clockwise boundary loop.
+        let mut boundary: Vec<u32> = (0..k).map(|i| id(i, 0)).collect();
+        boundary.extend((0..k).map(|j| id(k, j)));
+        boundary.extend((0..k).map(|i| id(k - i, k)));
+        boundary.extend((0..k).map(|j| id(0, k - j)));
+        let opts = default_solve_options();
+        let a = tutte_solve(
+            &p,
+            &f,
+            &boundary,
+            TutteWeights::Uniform,
+            LinearSolver::Cholesky,
+            &opts,
+        )
+        .unwrap();
+        let b = tutte_report(&p, &f, &boundary, TutteWeights::Uniform, &opts).unwrap();
+        assert_eq!(a.flips, 0);
+        assert_eq!(a.iterations, 0);
+        assert!(a.relative_residual < 1e-12, "{}", a.relative_residual);
+        let diff =
+            a.uv.iter()
+                .zip(&b.uv)
+                .flat_map(|(x, y)| [x[0] - y[0], x[1] - y[1]])
+                .fold(0.0f64, |m, d| m.max(d.abs()));
+        assert!(diff < 1e-9, "{diff}");
+    }
 }

@@ -10,9 +10,10 @@
 //!   barrier-energy untanglers; [`rng`]: the crate's seeded pseudo-random numbers;
 //! - here: slice [`dot`] / [`norm`] and the thread-count-independent [`ordered_sum`].
 //!
-//! `linalg::direct` is reserved for a sparse direct (Cholesky) solver.
+//! - [`direct`]: sparse Cholesky (faer), symbolic analysis once per pattern.
 #![forbid(unsafe_code)]
 
+pub mod direct;
 pub mod krylov;
 pub mod lbfgs;
 pub mod pattern;

@@ -1,14 +1,16 @@
 //! Recovering per-vertex UVs from per-face Jacobians.
 //!
 //! Least squares (the default): `min_u Σ_f area_f ‖J_f(u) − A_f‖²`, a Poisson problem whose
-//! matrix (the cotangent Laplacian) depends only on the mesh, so it is assembled once and every
-//! recovery is two warm-started PCG solves. It spreads the consensus error of the per-face maps
-//! over the whole mesh instead of accumulating it along a tree, which is why it stays flip-free
-//! long before the breadth-first recovery does (see ../shared/notes/admm-prototype.md).
+//! matrix (the cotangent Laplacian) depends only on the mesh, so it is assembled and factored
+//! (sparse Cholesky) once and every recovery is two pairs of triangular solves. It spreads the
+//! consensus error of the per-face maps over the whole mesh instead of accumulating it along a
+//! tree, which is why it stays flip-free long before the breadth-first recovery does (see
+//! ../shared/notes/admm-prototype.md).
 
 use sprs::{CsMat, TriMat};
 
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
+use crate::linalg::direct::{Cholesky, DirectError};
 use crate::linalg::SolveError;
 use crate::param::admm::AdmmProblem;
 
@@ -20,8 +22,8 @@ pub struct LeastSquaresRecovery {
     index: Vec<u32>,
     /// The pinned vertex (fixes the translation).
     pinned: u32,
-    /// The cotangent Laplacian with its preconditioner, built once.
-    solver: KrylovSolver,
+    /// The cotangent Laplacian, factored (or with its preconditioner) once.
+    solver: Solver,
     /// #F×3 gradients of the corner hat functions in the face's frame.
     grads: Vec<[[f64; 2]; 3]>,
     /// #F face areas.
@@ -81,25 +83,36 @@ impl LeastSquaresRecovery {
             grads.push(g);
         }
         let laplacian: CsMat<f64> = tri.to_csr();
-        // Multigrid-preconditioned CG, set up once: every recovery is two warm-started solves.
-        let opts = CgOptions {
-            tolerance: 1e-10,
-            max_iterations: 20 * free.len().max(100),
-            preconditioner: Preconditioner::Amg { block_size: 1 },
+        // Factored once: every recovery is then two triangular solve pairs, exact, 7–80× faster
+        // than the warm-started multigrid CG it replaced (BENCHMARKS.md, issue 26).
+        // A Laplacian that is not positive definite (faces in several components, only one
+        // of them pinned) falls back to that CG, which still converges on a consistent system.
+        let solver = match Cholesky::new(&laplacian) {
+            Ok(c) => Solver::Cholesky(c),
+            Err(DirectError::NotPositiveDefinite { .. }) => {
+                let opts = CgOptions {
+                    tolerance: 1e-10,
+                    max_iterations: 20 * free.len().max(100),
+                    preconditioner: Preconditioner::Amg { block_size: 1 },
+                };
+                Solver::Pcg(Box::new(KrylovSolver::cg(&laplacian, &opts)?))
+            }
+            Err(e) => return Err(e.into()),
         };
         Ok(LeastSquaresRecovery {
             free,
             index,
             pinned,
-            solver: KrylovSolver::cg(&laplacian, &opts)?,
+            solver,
             grads,
             areas: problem.area.clone(),
             faces: faces.to_vec(),
         })
     }
 
-    /// Recovers UVs from the Jacobians `a` (#F, row-major 2x2). `uv` (#V) is the warm start and
-    /// is overwritten for referenced vertices; the pinned vertex keeps its value.
+    /// Recovers UVs from the Jacobians `a` (#F, row-major 2x2). `uv` (#V) is overwritten for
+    /// referenced vertices (its values are the warm start of the CG fallback); the pinned
+    /// vertex keeps its value.
     pub fn recover(&self, a: &[[f64; 4]], uv: &mut [[f64; 2]]) -> Result<(), SolveError> {
         let n = self.free.len();
         let pin = uv[self.pinned as usize];
@@ -126,13 +139,25 @@ impl LeastSquaresRecovery {
                 }
             }
             let mut x: Vec<f64> = self.free.iter().map(|&v| uv[v as usize][r]).collect();
-            self.solver.solve(&b, &mut x)?;
+            match &self.solver {
+                Solver::Pcg(s) => {
+                    s.solve(&b, &mut x)?;
+                }
+                Solver::Cholesky(c) => c.solve(&b, &mut x)?,
+            }
             for (k, &v) in self.free.iter().enumerate() {
                 uv[v as usize][r] = x[k];
             }
         }
         Ok(())
     }
+}
+
+/// The linear solver of [`LeastSquaresRecovery`]: the factor, or CG where the Laplacian is
+/// only semi-definite.
+enum Solver {
+    Pcg(Box<KrylovSolver>),
+    Cholesky(Cholesky),
 }
 
 /// How per-vertex UVs are recovered from the per-face maps.

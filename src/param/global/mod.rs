@@ -9,8 +9,9 @@
 //! it by the largest flip-free step ([`line_search`]) with Armijo backtracking, so every
 //! iterate is foldover-free and the objective decreases monotonically. While some faces are
 //! over the distortion bound, the objective is taken w.r.t. progressive reference triangles
-//! ([`progressive`]). Systems share one CSR pattern ([`assembly`]) and are solved by
-//! preconditioned CG ([`crate::linalg::cg::KrylovSolver`]).
+//! ([`progressive`]). Systems share one CSR pattern ([`assembly`]) and are solved by sparse
+//! Cholesky, its symbolic analysis computed once ([`crate::linalg::direct`]), or by
+//! preconditioned CG ([`crate::linalg::cg::KrylovSolver`], [`GlobalOptions::linear_solver`]).
 //!
 //! Converged when the energy has stopped decreasing: its relative decrease per iteration over
 //! the last [`GlobalOptions::energy_window`] iterations is under [`GlobalOptions::energy_tol`]
@@ -37,6 +38,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
+use crate::linalg::direct::{CholeskySymbolic, DirectError, LinearSolver};
 use crate::linalg::{par_dot as dot, SolveError};
 use crate::mesh::{FaceFrames, TriMesh};
 use crate::param::energy::{self, Energy};
@@ -78,6 +80,10 @@ pub struct GlobalOptions {
     /// Iterations after which progressive references are dropped even if some faces are
     /// still over the bound.
     pub progressive_max_iters: usize,
+    /// Linear solver of the proxy and Newton systems: sparse Cholesky (the default: the
+    /// symbolic analysis once per solve, a numeric factorisation per iteration; 3–8× faster end
+    /// to end than multigrid CG, BENCHMARKS.md issue 26) or PCG with the options below.
+    pub linear_solver: LinearSolver,
     /// Preconditioner of the CG solves.
     pub preconditioner: Preconditioner,
     /// Relative CG tolerance in the proxy phase (a direction only needs to be rough).
@@ -111,6 +117,7 @@ impl GlobalOptions {
                 Energy::Mips => 20.0,
             }),
             progressive_max_iters: 30,
+            linear_solver: LinearSolver::default(),
             preconditioner: Preconditioner::Amg { block_size: 2 },
             cg_tol_proxy: 1e-2,
             cg_tol_newton: 1e-8,
@@ -368,6 +375,8 @@ pub fn solve(
         });
     }
     let mut pattern = Pattern::new(mesh)?;
+    // Sparse Cholesky's ordering and symbolic factorisation of the pattern, on first use.
+    let mut symbolic: Option<CholeskySymbolic> = None;
     let mut history = Vec::new();
     let mut totals = PhaseTotals::default();
     let mut phase = Phase::Proxy;
@@ -440,6 +449,7 @@ pub fn solve(
                 &g,
                 used,
                 &mut pattern,
+                &mut symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -470,6 +480,7 @@ pub fn solve(
                 &g,
                 used,
                 &mut pattern,
+                &mut symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -486,6 +497,7 @@ pub fn solve(
                 &g,
                 Phase::Proxy,
                 &mut pattern,
+                &mut symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -508,6 +520,7 @@ pub fn solve(
                 &g,
                 Phase::Proxy,
                 &mut pattern,
+                &mut symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -635,6 +648,7 @@ fn direction(
     g: &[f64],
     phase: Phase,
     pattern: &mut Pattern,
+    symbolic: &mut Option<CholeskySymbolic>,
     opts: &GlobalOptions,
     forcing: f64,
     d: &mut [f64],
@@ -655,6 +669,32 @@ fn direction(
         })
         .collect();
     pattern.fill(problem.faces, &local, REL_SHIFT);
+    let rhs: Vec<f64> = g.iter().map(|v| -v).collect();
+    if opts.linear_solver == LinearSolver::Cholesky {
+        if symbolic.is_none() {
+            *symbolic = Some(CholeskySymbolic::new(&pattern.matrix)?);
+        }
+        let factor = symbolic.as_ref().map(|s| s.factor(&pattern.matrix));
+        match factor {
+            Some(Ok(chol)) => {
+                chol.solve(&rhs, d)?;
+                return Ok((dot(g, d), 0));
+            }
+            // An exact Hessian away from a minimum: `SolveError::Failed`, which the caller
+            // treats like CG's negative curvature.
+            Some(Err(e @ DirectError::NotPositiveDefinite { .. }))
+                if phase == Phase::ExactNewton =>
+            {
+                return Err(e.into())
+            }
+            // The proxy and projected Hessians are positive definite up to the diagonal shift;
+            // should rounding still break the factorisation, CG below gets the step.
+            Some(Err(DirectError::NotPositiveDefinite { .. })) => {}
+            Some(Err(e)) => return Err(e.into()),
+            // Set above.
+            None => {}
+        }
+    }
     let cg = CgOptions {
         tolerance: match phase {
             Phase::Proxy => opts.cg_tol_proxy,
@@ -667,7 +707,6 @@ fn direction(
         preconditioner: opts.preconditioner,
     };
     let solver = KrylovSolver::cg(&pattern.matrix, &cg)?;
-    let rhs: Vec<f64> = g.iter().map(|v| -v).collect();
     d.fill(0.0);
     let iterations = match solver.solve(&rhs, d) {
         Ok(stats) => stats.iterations,
