@@ -7,6 +7,7 @@ mod cli {
     mod bad_inputs;
     mod determinism;
     mod nothing_lost;
+    mod tuning;
 }
 
 mod common;

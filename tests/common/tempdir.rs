@@ -1,8 +1,4 @@
 //! A per-test scratch directory, removed on drop.
-// Unused methods are allowed here too (not only in common/mod.rs) while a branch's test file may
-// still include this file by `#[path]` (tests/tuning.rs on the cli branch): move such a file
-// into a harness and this can go.
-#![allow(dead_code)]
 
 use std::collections::BTreeSet;
 use std::fs;

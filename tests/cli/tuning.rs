@@ -3,25 +3,16 @@
 //! file gives the bytes the library gives with the same options; a bad file is bad input
 //! (exit 2) naming file, line and key, with nothing written.
 
-#[path = "common/tempdir.rs"]
-mod tempdir;
-
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
+use crate::common::{data, TempDir};
 use foldfree::init::InitMethod;
 use foldfree::param::admm::{Accel, AdmmOptions};
 use foldfree::param::recover::Recovery;
 use foldfree::param::{BackendChoice, ParamJob, SolverChoice};
 use foldfree::tuning::Tuning;
-use tempdir::TempDir;
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/data")
-        .join(name)
-}
 
 fn foldfree(dir: &TempDir, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_foldfree"))
