@@ -162,7 +162,7 @@ pub fn cluster_faces(
         adj[c]
             .iter()
             .filter(|&&m| {
-                cone.map_or(true, |k| {
+                cone.is_none_or(|k| {
                     merged_cone(sums[c], k[c], sums[m as usize], k[m as usize]) <= max_cone
                 })
             })
@@ -218,7 +218,7 @@ pub fn cluster_faces(
                     // above every possible cost (a cost is at most 2 × the whole area).
                     let cost = (1.0 - cos) * area[c].min(area[m])
                         + if wide { 4.0 * total_area } else { 0.0 };
-                    if best.map_or(true, |b| cost < b.0) {
+                    if best.is_none_or(|b| cost < b.0) {
                         best = Some((cost, c, m, cos));
                     }
                 }
@@ -495,7 +495,7 @@ pub fn merge_unreachable_corners(
                         continue;
                     }
                     let d = dot(mean[a as usize], mean[b as usize]);
-                    if best.map_or(true, |x| d > x.0) {
+                    if best.is_none_or(|x| d > x.0) {
                         best = Some((d, a.min(b), a.max(b)));
                     }
                 }

@@ -79,7 +79,7 @@ pub fn relax_subset(
         for (f, &c) in labels.iter().enumerate().filter(|&(f, _)| movable[f]) {
             let e = err(normals, areas, f, proxy[c as usize]);
             let s = &mut seed[c as usize];
-            if s.map_or(true, |(be, _)| e < be) {
+            if s.is_none_or(|(be, _)| e < be) {
                 *s = Some((e, f));
             }
         }

@@ -647,7 +647,7 @@ fn run_once(
         } else {
             (nbad, bad)
         };
-        let better = best.as_ref().map_or(true, |b| nbad < b.nbad);
+        let better = best.as_ref().is_none_or(|b| nbad < b.nbad);
         let mut bad_regions: Vec<u32> = bad.iter().map(|&f| face_cluster[f]).collect();
         bad_regions.sort_unstable();
         bad_regions.dedup();

@@ -113,7 +113,7 @@ pub fn ear_clip(p: &[[f64; 2]]) -> Vec<[usize; 3]> {
         for i in 0..m {
             let (a, b, c) = (idx[(i + m - 1) % m], idx[i], idx[(i + 1) % m]);
             let o = orient(p[a], p[b], p[c]);
-            if best.map_or(true, |(_, bo)| o > bo) {
+            if best.is_none_or(|(_, bo)| o > bo) {
                 best = Some((i, o));
             }
             if o <= 0.0 {

@@ -416,7 +416,7 @@ fn most_shrunk_vertex(
         for v in 0..sub.positions.len() {
             if den[v] > 0.0 {
                 let ratio = num[v] / den[v];
-                if worst.map_or(true, |w| ratio > w.1) {
+                if worst.is_none_or(|w| ratio > w.1) {
                     worst = Some((cutm.origin[global[v] as usize], ratio));
                 }
             }

@@ -438,7 +438,7 @@ fn attempt(
                 let top_limit = chosen.map(|(x, y, r)| (y + masks[i][r as usize].h, x));
                 if let Some((x, y)) = atlas[page].first_fit(&grown, top_limit.map(|t| t.0), m.h) {
                     let key = (y + m.h, x);
-                    if top_limit.map_or(true, |t| key < t) {
+                    if top_limit.is_none_or(|t| key < t) {
                         chosen = Some((x, y, rot));
                     }
                 }

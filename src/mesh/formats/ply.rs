@@ -619,7 +619,7 @@ impl<'a> Reader<'a> {
             .map_err(|_| self.error(at, format!("list length {n} is negative")))?;
         if let Body::Binary { .. } = self.body {
             let left = self.bytes_left();
-            if n.checked_mul(item.size()).map_or(true, |need| need > left) {
+            if n.checked_mul(item.size()).is_none_or(|need| need > left) {
                 return Err(self.error(
                     at,
                     format!(

@@ -33,7 +33,7 @@ pub fn parse_stl(bytes: &[u8], file: &Path) -> Result<(TriMesh, SurfaceInfo), Me
     let text_start = bytes.iter().position(|b| !b.is_ascii_whitespace());
     let starts_solid = text_start.is_some_and(|i| {
         let rest = &bytes[i..];
-        rest.starts_with(b"solid") && rest.get(5).map_or(true, |b| b.is_ascii_whitespace())
+        rest.starts_with(b"solid") && rest.get(5).is_none_or(|b| b.is_ascii_whitespace())
     });
     // A NUL byte never occurs in ASCII STL; it marks a binary file whose count is wrong.
     if starts_solid && !size_matches && !bytes.contains(&0) {
