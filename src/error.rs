@@ -89,6 +89,16 @@ impl OptionError {
             range: range.to_string(),
         }
     }
+
+    /// The rejection of `key` by the `validate()` of the option type `options`.
+    pub fn reject<T>(
+        options: &'static str,
+        key: &str,
+        value: impl std::fmt::Display,
+        range: &str,
+    ) -> std::result::Result<T, OptionError> {
+        Err(OptionError::new(options, key, value, range))
+    }
 }
 
 /// Result alias used across the crate.

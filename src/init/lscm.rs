@@ -263,37 +263,21 @@ fn drop_zeros(a: &CsMat<f64>) -> CsMat<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::init::test_grid::{bumpy, id, max_diff};
 
     /// A bumpy 12x12 grid: Cholesky and multigrid CG give the same map.
     #[test]
     fn cholesky_and_pcg_agree() {
         let k = 12;
-        let mut p = Vec::new();
-        for j in 0..=k {
-            for i in 0..=k {
-                let (x, y) = (i as f64 / k as f64, j as f64 / k as f64);
-                p.push([x, y, 0.3 * (3.0 * x).sin() * (2.0 * y).cos()]);
-            }
-        }
-        let mut f = Vec::new();
-        let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
-        for j in 0..k {
-            for i in 0..k {
-                f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
+        let (p, f) = bumpy(k, |x, y| 0.3 * (3.0 * x).sin() * (2.0 * y).cos());
+        let id = |i, j| id(k, i, j);
         let pins = [id(0, 0), id(k, k)];
         let opts = default_solve_options();
         let a = lscm_solve(&p, &f, pins, LinearSolver::Cholesky, &opts).unwrap();
         let b = lscm_solve(&p, &f, pins, LinearSolver::Pcg, &opts).unwrap();
         assert_eq!(a.flips, 0);
         assert!(a.relative_residual < 1e-12, "{}", a.relative_residual);
-        let diff =
-            a.uv.iter()
-                .zip(&b.uv)
-                .flat_map(|(x, y)| [x[0] - y[0], x[1] - y[1]])
-                .fold(0.0f64, |m, d| m.max(d.abs()));
+        let diff = max_diff(&a.uv, &b.uv);
         assert!(diff < 1e-9, "{diff}");
     }
 }

@@ -250,3 +250,40 @@ impl InitMethod {
         }
     }
 }
+
+/// Test meshes shared by the start maps' unit tests.
+#[cfg(test)]
+pub(crate) mod test_grid {
+    /// A (k+1)² vertex grid over the unit square lifted to the height `z(x, y)`, two triangles
+    /// per cell.
+    pub fn bumpy(k: usize, z: impl Fn(f64, f64) -> f64) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+        let mut p = Vec::new();
+        for j in 0..=k {
+            for i in 0..=k {
+                let (x, y) = (i as f64 / k as f64, j as f64 / k as f64);
+                p.push([x, y, z(x, y)]);
+            }
+        }
+        let mut f = Vec::new();
+        for j in 0..k {
+            for i in 0..k {
+                f.push([id(k, i, j), id(k, i + 1, j), id(k, i + 1, j + 1)]);
+                f.push([id(k, i, j), id(k, i + 1, j + 1), id(k, i, j + 1)]);
+            }
+        }
+        (p, f)
+    }
+
+    /// Vertex (i, j) of [`bumpy`]`(k, …)`.
+    pub fn id(k: usize, i: usize, j: usize) -> u32 {
+        (j * (k + 1) + i) as u32
+    }
+
+    /// Largest coordinate difference of two maps.
+    pub fn max_diff(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+        a.iter()
+            .zip(b)
+            .flat_map(|(x, y)| [x[0] - y[0], x[1] - y[1]])
+            .fold(0.0f64, |m, d| m.max(d.abs()))
+    }
+}

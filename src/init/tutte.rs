@@ -296,26 +296,14 @@ fn mean_value_corner_weights(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::init::test_grid::{bumpy, id, max_diff};
 
     /// A bumpy disk-like grid: Cholesky and multigrid CG give the same uniform Tutte map.
     #[test]
     fn cholesky_and_pcg_agree() {
         let k = 10;
-        let mut p = Vec::new();
-        for j in 0..=k {
-            for i in 0..=k {
-                let (x, y) = (i as f64 / k as f64, j as f64 / k as f64);
-                p.push([x, y, 0.2 * (4.0 * x * y).sin()]);
-            }
-        }
-        let id = |i: usize, j: usize| (j * (k + 1) + i) as u32;
-        let mut f = Vec::new();
-        for j in 0..k {
-            for i in 0..k {
-                f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
+        let (p, f) = bumpy(k, |x, y| 0.2 * (4.0 * x * y).sin());
+        let id = |i, j| id(k, i, j);
         // Counter-clockwise boundary loop.
         let mut boundary: Vec<u32> = (0..k).map(|i| id(i, 0)).collect();
         boundary.extend((0..k).map(|j| id(k, j)));
@@ -335,11 +323,7 @@ mod tests {
         assert_eq!(a.flips, 0);
         assert_eq!(a.iterations, 0);
         assert!(a.relative_residual < 1e-12, "{}", a.relative_residual);
-        let diff =
-            a.uv.iter()
-                .zip(&b.uv)
-                .flat_map(|(x, y)| [x[0] - y[0], x[1] - y[1]])
-                .fold(0.0f64, |m, d| m.max(d.abs()));
+        let diff = max_diff(&a.uv, &b.uv);
         assert!(diff < 1e-9, "{diff}");
     }
 }

@@ -72,26 +72,24 @@ impl CutOptions {
     /// same): each extra or splitting seam costs a map of the charts, so their counts are
     /// capped where more could only turn a long run into a hang; the weights are finite.
     pub fn validate(&self) -> Result<(), crate::OptionError> {
-        fn bad(
-            what: &str,
-            value: impl std::fmt::Display,
-            range: &str,
-        ) -> Result<(), crate::OptionError> {
-            Err(crate::OptionError::new("cut", what, value, range))
-        }
         let w = self.curvature_weight;
         if !(w.is_finite() && (0.0..=1e6).contains(&w)) {
-            return bad("seam_curvature", w, "[0, 1e6]");
+            return crate::OptionError::reject("cut", "seam_curvature", w, "[0, 1e6]");
         }
         if self.extra_seams > 1000 {
-            return bad("extra_seams", self.extra_seams, "[0, 1000]");
+            return crate::OptionError::reject("cut", "extra_seams", self.extra_seams, "[0, 1000]");
         }
         let s = self.stretch_limit;
         if !(s.is_finite() && s >= 1.0) {
-            return bad("stretch_limit", s, "[1, ∞), finite");
+            return crate::OptionError::reject("cut", "stretch_limit", s, "[1, ∞), finite");
         }
         if self.overlap_splits > 1000 {
-            return bad("overlap_splits", self.overlap_splits, "[0, 1000]");
+            return crate::OptionError::reject(
+                "cut",
+                "overlap_splits",
+                self.overlap_splits,
+                "[0, 1000]",
+            );
         }
         Ok(())
     }

@@ -55,26 +55,25 @@ impl PackOptions {
     /// Checks the ranges (`resolution` 16..=16384, `padding` below a quarter of it, `max_pages`
     /// 1..=1000).
     pub fn validate(&self) -> Result<(), crate::OptionError> {
-        fn bad(
-            what: &str,
-            value: impl std::fmt::Display,
-            range: &str,
-        ) -> Result<(), crate::OptionError> {
-            Err(crate::OptionError::new("pack", what, value, range))
-        }
         if !(1..=1000).contains(&self.max_pages) {
-            return bad("max_pages", self.max_pages, "[1, 1000]");
+            return crate::OptionError::reject("pack", "max_pages", self.max_pages, "[1, 1000]");
         }
         if !(16..=16384).contains(&self.resolution) {
-            return bad("resolution", self.resolution, "[16, 16384]");
+            return crate::OptionError::reject(
+                "pack",
+                "resolution",
+                self.resolution,
+                "[16, 16384]",
+            );
         }
         if let Some(d) = self.texels_per_unit {
             if !(d.is_finite() && d > 0.0) {
-                return bad("texel_density", d, "(0, ∞), finite");
+                return crate::OptionError::reject("pack", "texel_density", d, "(0, ∞), finite");
             }
         }
         if self.padding >= self.resolution / 4 {
-            return bad(
+            return crate::OptionError::reject(
+                "pack",
                 "padding",
                 self.padding,
                 &format!("[0, {}) (a quarter of the resolution)", self.resolution / 4),

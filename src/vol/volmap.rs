@@ -105,7 +105,7 @@ impl VolmapOptions {
     /// beyond any converging run only turns a stall into a hang).
     pub fn validate(&self) -> Result<(), crate::OptionError> {
         let bad = |what: &str, value: String, range: &str| {
-            Err(crate::OptionError::new("volmap", what, value, range))
+            crate::OptionError::reject("volmap", what, value, range)
         };
         let pos = |x: f64| x.is_finite() && x > 0.0;
         for (what, x) in [

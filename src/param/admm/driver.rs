@@ -180,27 +180,30 @@ impl AdmmOptions {
     /// counts are at least 1 and bounded where a larger value can only run for ever (one face's
     /// Newton solve converges quadratically: more than 100 steps per iteration cannot help).
     pub fn validate(&self) -> Result<(), crate::OptionError> {
-        fn bad(
-            what: &str,
-            value: impl std::fmt::Display,
-            range: &str,
-        ) -> Result<(), crate::OptionError> {
-            Err(crate::OptionError::new("ADMM", what, value, range))
-        }
         let rel = |x: f64| x.is_finite() && x > 0.0 && x < 1.0;
         if let Some(mu) = self.mu_rel {
             if !(mu.is_finite() && mu > 0.0) {
-                return bad("mu", mu, "(0, ∞), finite");
+                return crate::OptionError::reject("ADMM", "mu", mu, "(0, ∞), finite");
             }
         }
         if !(1..=100_000_000).contains(&self.max_iters) {
-            return bad("max_iters", self.max_iters, "[1, 1e8]");
+            return crate::OptionError::reject("ADMM", "max_iters", self.max_iters, "[1, 1e8]");
         }
         if !(1..=100_000).contains(&self.check_every) {
-            return bad("check_every", self.check_every, "[1, 100000]");
+            return crate::OptionError::reject(
+                "ADMM",
+                "check_every",
+                self.check_every,
+                "[1, 100000]",
+            );
         }
         if !(1..=100).contains(&self.newton_iters) {
-            return bad("newton_iters", self.newton_iters, "[1, 100]");
+            return crate::OptionError::reject(
+                "ADMM",
+                "newton_iters",
+                self.newton_iters,
+                "[1, 100]",
+            );
         }
         for (what, x) in [
             ("tol_primal", self.tol_primal),
@@ -208,18 +211,28 @@ impl AdmmOptions {
             ("tol_energy", self.tol_energy),
         ] {
             if !rel(x) {
-                return bad(what, x, "(0, 1)");
+                return crate::OptionError::reject("ADMM", what, x, "(0, 1)");
             }
         }
         if !(1..=10_000).contains(&self.energy_checks) {
-            return bad("energy_checks", self.energy_checks, "[1, 10000]");
+            return crate::OptionError::reject(
+                "ADMM",
+                "energy_checks",
+                self.energy_checks,
+                "[1, 10000]",
+            );
         }
         if self.resync_every > 100_000_000 {
-            return bad("resync_every", self.resync_every, "[0, 1e8]");
+            return crate::OptionError::reject(
+                "ADMM",
+                "resync_every",
+                self.resync_every,
+                "[0, 1e8]",
+            );
         }
         if let Some(n) = self.stall_checks {
             if !(1..=10_000).contains(&n) {
-                return bad("stall_checks", n, "[1, 10000]");
+                return crate::OptionError::reject("ADMM", "stall_checks", n, "[1, 10000]");
             }
         }
         for (what, x) in [
@@ -228,21 +241,31 @@ impl AdmmOptions {
         ] {
             if let Some(x) = x {
                 if !(x.is_finite() && x >= 1.0) {
-                    return bad(what, x, "[1, ∞), finite");
+                    return crate::OptionError::reject("ADMM", what, x, "[1, ∞), finite");
                 }
             }
         }
         if !rel(self.balance_primal) {
-            return bad("balance_primal", self.balance_primal, "(0, 1)");
+            return crate::OptionError::reject(
+                "ADMM",
+                "balance_primal",
+                self.balance_primal,
+                "(0, 1)",
+            );
         }
         if !(1..=64).contains(&self.aa_depth) {
-            return bad("aa_depth", self.aa_depth, "[1, 64]");
+            return crate::OptionError::reject("ADMM", "aa_depth", self.aa_depth, "[1, 64]");
         }
         if !(1..=10_000).contains(&self.aa_every) {
-            return bad("aa_every", self.aa_every, "[1, 10000]");
+            return crate::OptionError::reject("ADMM", "aa_every", self.aa_every, "[1, 10000]");
         }
         if self.aa_balance_energy.is_nan() || self.aa_balance_energy <= 0.0 {
-            return bad("aa_balance_energy", self.aa_balance_energy, "(0, ∞]");
+            return crate::OptionError::reject(
+                "ADMM",
+                "aa_balance_energy",
+                self.aa_balance_energy,
+                "(0, ∞]",
+            );
         }
         Ok(())
     }
