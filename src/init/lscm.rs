@@ -11,9 +11,11 @@
 //! [`lscm`] solves it by sparse Cholesky ([`crate::linalg::direct`]); [`lscm_report`] and
 //! [`lscm_pinned`] by CG with the given options (multigrid aggregating the pair as one node,
 //! block size 2), whose iteration count grows with the boundary (the near-null space of the
-//! conformal energy is every holomorphic map, not just constants): ~200 iterations at 125k
-//! vertices, against ~20 for Tutte. The factorisation is several times faster on the corpus
-//! and igea (BENCHMARKS.md, issue 26).
+//! conformal energy is every holomorphic map, not just constants), while the factor of a
+//! planar-graph system under a fill-reducing ordering stays near-linear in size and its cost
+//! does not depend on conditioning. Measured over all 61 disks of the sweep corpus (MIPS,
+//! BENCHMARKS.md issue 26): the same maps, and the start-map time lower on all 61 (median 4.2×,
+//! least 1.3×; sweeps of two sessions, not side by side).
 //!
 //! The area term is assembled per face (Σ over each triangle's directed edges); interior
 //! edges cancel exactly, so holes need no special care. This is the start point of the ADMM
@@ -30,6 +32,7 @@ use super::{
 };
 use crate::linalg::cg::{pcg, CgOptions, Preconditioner};
 use crate::linalg::direct::{Cholesky, LinearSolver};
+use crate::linalg::sparse::relative_residual;
 use crate::linalg::SolveError;
 
 /// LSCM of a disk-topology mesh, solved by sparse Cholesky.
@@ -212,7 +215,7 @@ fn lscm_solve(
             }
             LinearSolver::Cholesky => {
                 Cholesky::new(&q)?.solve(&rhs, &mut x)?;
-                report.relative_residual = relative_residual(&q, &x, &rhs);
+                report.relative_residual = relative_residual(&q, &rhs, &x);
             }
         }
         for (r, &v) in free.iter().enumerate() {
@@ -223,21 +226,6 @@ fn lscm_solve(
     report.flips = count_flips(faces, &uv);
     report.uv = uv;
     Ok(report)
-}
-
-/// ‖b − Ax‖/‖b‖ (0 when b = 0).
-pub(crate) fn relative_residual(a: &CsMat<f64>, x: &[f64], b: &[f64]) -> f64 {
-    let mut r2 = 0.0;
-    for (i, row) in a.outer_iterator().enumerate() {
-        let ax: f64 = row.iter().map(|(j, &v)| v * x[j]).sum();
-        r2 += (b[i] - ax) * (b[i] - ax);
-    }
-    let b2: f64 = b.iter().map(|v| v * v).sum();
-    if b2 > 0.0 {
-        (r2 / b2).sqrt()
-    } else {
-        0.0
-    }
 }
 
 /// The same CSR matrix without its explicitly stored zeros.

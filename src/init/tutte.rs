@@ -14,8 +14,9 @@
 //! positive definite, boundary moved to the right-hand side): CG. Mean-value weights are not
 //! symmetric: each row is normalised to a convex combination (u_i − Σ_j λ_ij u_j = 0,
 //! Σ_j λ_ij = 1), a diagonally dominant M-matrix: BiCGSTAB. [`tutte`] factors the uniform
-//! system by sparse Cholesky ([`crate::linalg::direct`], both UV columns in one solve; faster
-//! than CG on the corpus and igea, BENCHMARKS.md issue 26); [`tutte_report`] and the
+//! system by sparse Cholesky ([`crate::linalg::direct`], both UV columns in one solve: one
+//! factorisation serves both right-hand sides, where CG iterates twice; BENCHMARKS.md issue
+//! 26 has the per-solve measurement); [`tutte_report`] and the
 //! mean-value system use the Krylov solvers, preconditioned by algebraic multigrid by default
 //! (about 20 iterations at 125k interior vertices), both UV columns solved in parallel.
 #![forbid(unsafe_code)]
@@ -29,6 +30,7 @@ use super::{
 };
 use crate::linalg::cg::{bicgstab_multi, pcg_multi, CgOptions};
 use crate::linalg::direct::{Cholesky, LinearSolver};
+use crate::linalg::sparse::relative_residual;
 use crate::linalg::SolveError;
 
 /// Edge weights of the Tutte embedding.
@@ -172,7 +174,7 @@ fn tutte_solve(
                 x[c].copy_from_slice(&both[c * m..(c + 1) * m]);
                 report.relative_residual = report
                     .relative_residual
-                    .max(super::lscm::relative_residual(&a, &x[c], &rhs[c]));
+                    .max(relative_residual(&a, &rhs[c], &x[c]));
             }
         } else {
             let stats = match weights {

@@ -9,7 +9,7 @@
 //! are computed once per pattern; each matrix then costs one numeric factorisation
 //! ([`CholeskySymbolic::factor`]) and each right-hand side two triangular solves
 //! ([`Cholesky::solve`]), with an exact answer instead of an iteration count that grows with
-//! the mesh (LSCM: ~200 multigrid-CG iterations at 125k vertices). BENCHMARKS.md (issue 26)
+//! the mesh and its conditioning. BENCHMARKS.md (issue 26)
 //! has the measurements that decided which solver each caller uses.
 //!
 //! A matrix that is not positive definite (an indefinite exact Hessian, a singular system)

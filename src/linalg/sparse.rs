@@ -193,6 +193,18 @@ pub(crate) fn residual(a: &Csr, b: &[f64], x: &[f64], r: &mut [f64]) -> f64 {
     norm(r)
 }
 
+/// ‖b − A·x‖ / ‖b‖ (0 when b = 0): the accuracy report of a direct solve.
+pub fn relative_residual(a: &Csr, b: &[f64], x: &[f64]) -> f64 {
+    let mut r = vec![0.0; b.len()];
+    let rn = residual(a, b, x, &mut r);
+    let bn = norm(b);
+    if bn > 0.0 {
+        rn / bn
+    } else {
+        0.0
+    }
+}
+
 pub(crate) fn check_vectors(a: &Csr, b: &[f64], x: &[f64]) -> Result<(), SolveError> {
     if b.len() != a.rows() || x.len() != a.rows() {
         return Err(SolveError::InvalidInput {

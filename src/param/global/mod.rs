@@ -81,8 +81,10 @@ pub struct GlobalOptions {
     /// still over the bound.
     pub progressive_max_iters: usize,
     /// Linear solver of the proxy and Newton systems: sparse Cholesky (the default: the
-    /// symbolic analysis once per solve, a numeric factorisation per iteration; 3–8× faster end
-    /// to end than multigrid CG, BENCHMARKS.md issue 26) or PCG with the options below.
+    /// symbolic analysis once per solve, a numeric factorisation per iteration, exact
+    /// directions whatever the Hessian's conditioning, which is what CG's iteration count
+    /// grows with near convergence; the atlas sweep of all 77 non-disk corpus meshes ran 77/77
+    /// with the same energies, BENCHMARKS.md issue 26) or PCG with the options below.
     pub linear_solver: LinearSolver,
     /// Preconditioner of the CG solves.
     pub preconditioner: Preconditioner,
