@@ -12,8 +12,8 @@
 
 use foldfree::init::tutte::TutteWeights;
 use foldfree::init::{initial_map, normalize_area, InitMethod};
-use foldfree::linalg::cg::Preconditioner;
 use foldfree::linalg::direct::LinearSolver;
+use foldfree::linalg::precond::Preconditioner;
 use foldfree::mesh;
 use foldfree::param::global::{self, GlobalOptions};
 use foldfree::param::Energy;

@@ -8,9 +8,12 @@ use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use foldfree::init::{self, TutteWeights};
-use foldfree::linalg::cg::{bicgstab, pcg, pcg_multi, CgOptions, KrylovSolver, Preconditioner};
 use foldfree::linalg::small;
 use foldfree::linalg::SolveError;
+use foldfree::linalg::{
+    krylov::{bicgstab, pcg, pcg_multi, CgOptions, KrylovSolver},
+    precond::Preconditioner,
+};
 use foldfree::metrics;
 use sprs::{CsMat, TriMat};
 
@@ -83,7 +86,7 @@ fn uv_of(positions: &[[f64; 3]]) -> Vec<[f64; 2]> {
     positions.iter().map(|p| [p[0], p[1]]).collect()
 }
 
-// ---------------------------------------------------------------- linalg::cg
+// ---------------------------------------------------------------- linalg::krylov
 
 #[test]
 fn pcg_solves_random_spd_system_to_tolerance_with_every_preconditioner() {

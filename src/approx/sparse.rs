@@ -3,8 +3,11 @@
 
 use sprs::CsMat;
 
-use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
 use crate::linalg::SolveError;
+use crate::linalg::{
+    krylov::{CgOptions, KrylovSolver},
+    precond::Preconditioner,
+};
 
 /// y = A x for CSR `a`.
 pub fn spmv(a: &CsMat<f64>, x: &[f64]) -> Vec<f64> {

@@ -30,10 +30,13 @@ use super::{
     check_faces, check_input, count_flips, default_solve_options, orient_ccw, unique_edges,
     unreached, InitReport,
 };
-use crate::linalg::cg::{pcg, CgOptions, Preconditioner};
 use crate::linalg::direct::{Cholesky, LinearSolver};
 use crate::linalg::sparse::relative_residual;
 use crate::linalg::SolveError;
+use crate::linalg::{
+    krylov::{pcg, CgOptions},
+    precond::Preconditioner,
+};
 
 /// LSCM of a disk-topology mesh, solved by sparse Cholesky.
 ///

@@ -12,8 +12,8 @@ pub mod tutte;
 pub use lscm::{lscm, lscm_pinned, lscm_pins, lscm_report};
 pub use tutte::{tutte, tutte_report, TutteWeights};
 
-use crate::linalg::cg::{CgOptions, Preconditioner};
 use crate::linalg::SolveError;
+use crate::linalg::{krylov::CgOptions, precond::Preconditioner};
 use crate::mesh::{Topology, TriMesh};
 
 /// A starting map with what it cost and how valid it is.

@@ -28,8 +28,8 @@ use super::{
     check_input, count_flips, default_solve_options, orient_ccw, unique_edges, unreached,
     InitReport,
 };
-use crate::linalg::cg::{bicgstab_multi, pcg_multi, CgOptions};
 use crate::linalg::direct::{Cholesky, LinearSolver};
+use crate::linalg::krylov::{bicgstab_multi, pcg_multi, CgOptions};
 use crate::linalg::sparse::relative_residual;
 use crate::linalg::SolveError;
 

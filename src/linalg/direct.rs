@@ -1,6 +1,6 @@
 //! Sparse Cholesky (LLᵀ) of symmetric positive definite `sprs` matrices, through `faer`.
 //!
-//! Why a direct solver next to the preconditioned CG of [`super::cg`]: the systems of the
+//! Why a direct solver next to the preconditioned CG of [`super::krylov`]: the systems of the
 //! surface solvers are 2D-mesh Laplacians and Hessians (planar graphs), whose Cholesky factor
 //! stays sparse under a fill-reducing ordering (AMD here; O(n log n) entries under nested
 //! dissection), and the systems come in families that share one sparsity pattern: one
@@ -220,7 +220,7 @@ impl Cholesky {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LinearSolver {
-    /// Krylov ([`super::cg`]) with the caller's preconditioner and tolerance.
+    /// Krylov ([`super::krylov`]) with the caller's preconditioner and tolerance.
     Pcg,
     /// [`Cholesky`]: exact up to rounding, symbolic analysis reused per pattern.
     #[default]

@@ -23,13 +23,6 @@ pub mod small;
 pub mod sparse;
 pub mod vec3;
 
-/// The solver API under its historic path (`linalg::cg::pcg`, …), kept for call sites.
-pub mod cg {
-    pub use super::krylov::*;
-    pub use super::precond::Preconditioner;
-    pub use super::sparse::PARALLEL_ROWS;
-}
-
 use rayon::prelude::*;
 
 /// Σ a_i·b_i over the common length, summed in order (the solvers' and energies' one slice

@@ -9,9 +9,12 @@
 
 use sprs::{CsMat, TriMat};
 
-use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
 use crate::linalg::direct::{Cholesky, DirectError};
 use crate::linalg::SolveError;
+use crate::linalg::{
+    krylov::{CgOptions, KrylovSolver},
+    precond::Preconditioner,
+};
 use crate::param::admm::AdmmProblem;
 
 /// Precomputed Poisson system for least-squares recovery.

@@ -6,7 +6,7 @@ use sprs::TriMat;
 
 use super::tet::TetMesh;
 use super::VolError;
-use crate::linalg::cg::pcg_multi;
+use crate::linalg::krylov::pcg_multi;
 use crate::linalg::pattern::neighbours;
 
 /// Positions `base + u` where u is harmonic (graph Laplacian of the tet edges) with

@@ -16,9 +16,12 @@ use rayon::prelude::*;
 use super::energy::{inv3, sym_dirichlet, sym_dirichlet_grad, sym_dirichlet_hessian_psd, Mat3};
 use super::line_search::max_flip_free_step;
 use super::VolError;
-use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
 use crate::linalg::pattern::BlockPattern;
 use crate::linalg::SolveError;
+use crate::linalg::{
+    krylov::{CgOptions, KrylovSolver},
+    precond::Preconditioner,
+};
 
 /// Corner weights D (4x3) of a linear Jacobian: M = Xᵀ·D for the tet's corner rows X (4x3).
 pub type Corner = [[f64; 3]; 4];

@@ -274,6 +274,6 @@ fn the_library_tuning_type_reads_checks_and_locates() {
     .expect("amg");
     assert_eq!(
         t.volmap.newton.cg.preconditioner,
-        foldfree::linalg::cg::Preconditioner::Amg { block_size: 3 }
+        foldfree::linalg::precond::Preconditioner::Amg { block_size: 3 }
     );
 }

@@ -11,7 +11,7 @@
 //! over the distortion bound, the objective is taken w.r.t. progressive reference triangles
 //! ([`progressive`]). Systems share one CSR pattern ([`assembly`]) and are solved by sparse
 //! Cholesky, its symbolic analysis computed once ([`crate::linalg::direct`]), or by
-//! preconditioned CG ([`crate::linalg::cg::KrylovSolver`], [`GlobalOptions::linear_solver`]).
+//! preconditioned CG ([`crate::linalg::krylov::KrylovSolver`], [`GlobalOptions::linear_solver`]).
 //!
 //! Converged when the energy has stopped decreasing: its relative decrease per iteration over
 //! the last [`GlobalOptions::energy_window`] iterations is under [`GlobalOptions::energy_tol`]
@@ -37,8 +37,11 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::linalg::cg::{CgOptions, KrylovSolver, Preconditioner};
 use crate::linalg::direct::{CholeskySymbolic, DirectError, LinearSolver};
+use crate::linalg::{
+    krylov::{CgOptions, KrylovSolver},
+    precond::Preconditioner,
+};
 use crate::linalg::{par_dot as dot, SolveError};
 use crate::mesh::{FaceFrames, TriMesh};
 use crate::param::energy::{self, Energy};
