@@ -372,6 +372,23 @@ fn visit_boundary_intersections(
             }
         }
     }
+    visit_segment_intersections(uv, &segs, visit);
+}
+
+/// Number of pairs of the segments `segs` (vertex pairs into `uv`) that intersect while
+/// sharing no vertex: [`boundary_self_intersections`] for boundary edges given directly (the
+/// global solver's bijectivity check after every step).
+pub fn segment_intersections(uv: &[[f64; 2]], segs: &[[u32; 2]]) -> usize {
+    let mut count = 0;
+    visit_segment_intersections(uv, segs, &mut |_, _| count += 1);
+    count
+}
+
+fn visit_segment_intersections(
+    uv: &[[f64; 2]],
+    segs: &[[u32; 2]],
+    visit: &mut dyn FnMut([u32; 2], [u32; 2]),
+) {
     let n = segs.len();
     if n < 2 {
         return;
@@ -392,7 +409,7 @@ fn visit_boundary_intersections(
         // Non-finite UVs: no meaningful geometry; fall back to the plain pair test.
         visit_pairs(
             uv,
-            &segs,
+            segs,
             &bbox,
             (0..n).collect::<Vec<_>>().as_slice(),
             None,
@@ -452,7 +469,7 @@ fn visit_boundary_intersections(
         let here = &cell_segs[start[c]..start[c + 1]];
         visit_pairs(
             uv,
-            &segs,
+            segs,
             &bbox,
             here,
             Some(&|x: f64, y: f64| cell_of(y, 1) * g + cell_of(x, 0) == c),

@@ -1,4 +1,4 @@
-//! Pictures (`foldfree param --svg/--png/--plot/--plot-png` and the `viz` library calls):
+//! Pictures (`foldfree param --svg/--png/--plot` and the `viz` library calls):
 //! the files exist, the SVG holds one subpath per face and no NaN, the PNGs decode to the
 //! requested size, are not blank, keep the margins clear, and show pure red exactly when a
 //! face is flipped. Uses only tests/data (plus an ignored timing run on a shared mesh).
@@ -120,7 +120,7 @@ fn run_with_pictures(mesh: &str, extra: &[&str]) -> (TempDir, usize) {
         .arg(dir.join("layout.png"))
         .arg("--plot")
         .arg(dir.join("conv.svg"))
-        .arg("--plot-png")
+        .arg("--plot")
         .arg(dir.join("conv.png"))
         .args(extra)
         .output()

@@ -245,6 +245,7 @@ fn run(
         &topo,
         opts.init,
         SolverChoice::Admm,
+        opts.bijective,
         &opts.admm,
         Some(&device),
         &mut |p| match p {

@@ -104,6 +104,8 @@ pub fn required_features() -> RequiredFeatures {
 pub struct EmbedOptions {
     pub init: InitMethod,
     pub admm: AdmmOptions,
+    /// A bijective map (no boundary overlap; see [`crate::param::global::scaffold`]).
+    pub bijective: bool,
     pub validate: mesh::ValidateOptions,
 }
 
@@ -112,6 +114,7 @@ impl Default for EmbedOptions {
         EmbedOptions {
             init: InitMethod::Lscm,
             admm: AdmmOptions::default(),
+            bijective: true,
             validate: mesh::ValidateOptions::default(),
         }
     }

@@ -75,6 +75,7 @@ pub(crate) fn run_atlas(
                     &sub_topo,
                     job.init,
                     solver,
+                    job.bijective,
                     admm,
                     device.as_ref(),
                     progress,

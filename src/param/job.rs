@@ -52,6 +52,10 @@ pub struct ParamJob {
     /// closed meshes it reached equal or lower SD than ADMM + hand-off in a fifth to a twelfth
     /// of the time (BENCHMARKS.md, "Atlas chart solver").
     pub atlas_solver: SolverChoice,
+    /// Every map bijective: no chart boundary overlaps itself (see
+    /// [`crate::param::global::scaffold`]); `false` gives the unconstrained optimum, and an
+    /// atlas then splits the charts that overlap (`CutOptions::overlap_splits`).
+    pub bijective: bool,
     pub backend: BackendChoice,
     /// Vulkan device name substring or index.
     pub device: Option<String>,
@@ -85,6 +89,7 @@ impl ParamJob {
             init: InitMethod::Lscm,
             solver: SolverChoice::Admm,
             atlas_solver: SolverChoice::Global,
+            bijective: true,
             backend: BackendChoice::Auto,
             device: None,
             validation: false,
@@ -335,6 +340,7 @@ fn solve(
         topo,
         job.init,
         solver,
+        job.bijective,
         &admm,
         device.as_ref(),
         progress,

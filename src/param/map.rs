@@ -8,6 +8,12 @@
 //! and decreases the energy (largest flip-free step, then Armijo backtracking). So the result is
 //! never worse than ADMM's best map, and the global solver's own stop test decides convergence.
 //! [`SolverPath`] names what ran. Ctrl-C ends the run with the best map so far, no hand-off.
+//!
+//! With `bijective` (the default of every job) the map's boundary does not cross itself
+//! either: the global solver keeps it apart ([`crate::param::global::scaffold`]), and a map of
+//! ADMM's whose boundary overlaps (its per-face steps know nothing of the boundary) goes to the
+//! bijective global solver from the start map, or from Tutte's when the start map is not an
+//! embedding.
 #![forbid(unsafe_code)]
 
 use std::time::Instant;
@@ -220,6 +226,7 @@ pub fn compute_map(
     topo: &Topology,
     init: InitMethod,
     solver: SolverChoice,
+    bijective: bool,
     opts: &AdmmOptions,
     device: Option<&OnDevice<'_>>,
     progress: &mut dyn FnMut(Progress<'_>),
@@ -236,8 +243,12 @@ pub fn compute_map(
     let mut out = MapOutput::unsolved(Vec::new(), init_flips, seconds_init);
     let global_opts = GlobalOptions {
         stop: opts.stop.clone(),
+        bijective,
         ..GlobalOptions::for_energy(opts.energy)
     };
+    // A start the bijective global solver accepts: flip-free, finite energy and a boundary
+    // that does not touch itself.
+    let simple = |uv: &[[f64; 2]]| !bijective || global::scaffold::simple_boundary(uv, &mesh.faces);
     // The global solver from `uv` (from a Tutte map instead when `uv` folds, or when its energy
     // overflows — a face shrunk to ~1e-160 of the mean is flip-free but has SD = ∞: the solver
     // never crosses an infinite barrier, so it could not start), recorded in `out` as `path`.
@@ -251,7 +262,8 @@ pub fn compute_map(
                            out: &mut MapOutput,
                            progress: &mut dyn FnMut(Progress<'_>)|
      -> Result<()> {
-        if folded || !finite(uv) {
+        if folded || !finite(uv) || !simple(uv) {
+            // Tutte's map is an embedding: flip-free with a simple (convex) boundary.
             *uv = tutte_map(mesh, topo, area_3d, &finite)?;
         }
         let g = global::solve(mesh, &frames, uv, &global_opts, &mut |it| {
@@ -286,6 +298,9 @@ pub fn compute_map(
                     &uv,
                     &GlobalOptions {
                         proxy_only: true,
+                        // ADMM's steps do not keep the boundary apart: its result is checked
+                        // below instead.
+                        bijective: false,
                         ..global_opts.clone()
                     },
                     &mut |it| progress(Progress::Global(it)),
@@ -325,6 +340,22 @@ pub fn compute_map(
                 )?;
             }
             out.admm = Some(result);
+            if !simple(&uv) && !out.admm.as_ref().is_some_and(|r| r.interrupted()) {
+                // ADMM's per-face steps know nothing of the boundary: a map whose boundary
+                // overlaps goes to the bijective global solver, from the start map when that
+                // is an embedding, else from Tutte's.
+                let mut start = initial_map(mesh, topo, init)?;
+                normalize_area(mesh, &mut start, area_3d);
+                let folded = crate::init::count_flips(&mesh.faces, &start) > 0;
+                finish_globally(
+                    &mut start,
+                    folded,
+                    SolverPath::AdmmGlobal,
+                    &mut out,
+                    progress,
+                )?;
+                uv = start;
+            }
         }
         SolverChoice::Global => {
             finish_globally(

@@ -240,3 +240,46 @@ pub fn metrics(obj: &Obj) -> Result<Metrics, String> {
         }),
     })
 }
+
+/// Pairs of boundary segments of a UV layout that cross (sharing no vertex), by brute force
+/// over all pairs: the boundary is every UV edge used by one face. Independent of the
+/// library's grid-accelerated count (`metrics::boundary_self_intersections`).
+pub fn boundary_crossings(faces: &[[usize; 3]], uv: &[[f64; 2]]) -> usize {
+    let mut count = HashMap::<[usize; 2], usize>::new();
+    for t in faces {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *count.entry([a.min(b), a.max(b)]).or_default() += 1;
+        }
+    }
+    let segs: Vec<[usize; 2]> = count
+        .into_iter()
+        .filter(|&(_, n)| n == 1)
+        .map(|(e, _)| e)
+        .collect();
+    let p = |i: usize| uv[i];
+    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    };
+    let mut n = 0;
+    for i in 0..segs.len() {
+        for j in i + 1..segs.len() {
+            let ([a, b], [c, d]) = (segs[i], segs[j]);
+            if a == c || a == d || b == c || b == d {
+                continue;
+            }
+            let (d1, d2) = (orient(p(c), p(d), p(a)), orient(p(c), p(d), p(b)));
+            let (d3, d4) = (orient(p(a), p(b), p(c)), orient(p(a), p(b), p(d)));
+            if d1 * d2 < 0.0 && d3 * d4 < 0.0 {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+/// [`boundary_crossings`] of an OBJ's `vt` layout.
+pub fn file_boundary_crossings(obj: &Obj) -> usize {
+    let faces: Vec<[usize; 3]> = obj.f_vt.iter().flatten().copied().collect();
+    boundary_crossings(&faces, &obj.vt)
+}

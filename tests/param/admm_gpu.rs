@@ -1115,6 +1115,7 @@ fn vulkan_admm_hands_off_like_its_cpu_twin() {
             &topo,
             InitMethod::Lscm,
             SolverChoice::Admm,
+            true,
             &opts,
             ctx.map(OnDevice::new).as_ref(),
             &mut |_| {},

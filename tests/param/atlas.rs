@@ -166,7 +166,7 @@ fn check_atlas(input: &Path, dir: &TempDir, extra: &[&str], expect_charts: Optio
     // Boundary crossings counted from the file alone (brute force over the vt boundary).
     assert_eq!(
         report["boundary_self_intersections"],
-        file_boundary_crossings(&obj),
+        objcheck::file_boundary_crossings(&obj),
         "report vs file: boundary crossings"
     );
     assert_eq!(
@@ -257,75 +257,42 @@ fn check_texels(obj: &objcheck::Obj, groups: &[Vec<usize>], n: usize, padding: u
     }
 }
 
-/// Pairs of boundary segments of the file's UV layout that cross (sharing no vertex), by
-/// brute force: the boundary is every vt edge used by one face.
-fn file_boundary_crossings(obj: &objcheck::Obj) -> usize {
-    let mut count = std::collections::HashMap::<[usize; 2], usize>::new();
-    for t in obj.f_vt.iter().flatten() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *count.entry([a.min(b), a.max(b)]).or_default() += 1;
-        }
-    }
-    let segs: Vec<[usize; 2]> = count
-        .into_iter()
-        .filter(|&(_, n)| n == 1)
-        .map(|(e, _)| e)
-        .collect();
-    let p = |i: usize| obj.vt[i];
-    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
-        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-    };
-    let mut n = 0;
-    for i in 0..segs.len() {
-        for j in i + 1..segs.len() {
-            let ([a, b], [c, d]) = (segs[i], segs[j]);
-            if a == c || a == d || b == c || b == d {
-                continue;
-            }
-            let (d1, d2) = (orient(p(c), p(d), p(a)), orient(p(c), p(d), p(b)));
-            let (d3, d4) = (orient(p(a), p(b), p(c)), orient(p(a), p(b), p(d)));
-            if d1 * d2 < 0.0 && d3 * d4 < 0.0 {
-                n += 1;
-            }
-        }
-    }
-    n
-}
-
+/// The global solver's single block chart, unconstrained, folds its boundary over itself
+/// (checked from the file). By default the map is bijective: one chart, no crossing, no
+/// splitting seam. With `--no-bijective` the overlapping chart is split by seams (the fallback).
 #[test]
-fn chart_overlapping_itself_is_split_until_injective() {
-    // The global solver's single block chart folds its boundary over itself (5 crossings
-    // with `[cut] overlap_splits = 0`, in BENCHMARKS.md's sweep); by default such charts are split.
+fn chart_that_would_overlap_itself_stays_one_bijective_chart() {
+    let dir = TempDir::new("atlas_bijective");
+    let args = ["--solver", "global", "--energy", "sd"];
+    let r = check_atlas(&data("block"), &dir, &args, Some(1));
+    assert_eq!(r["boundary_self_intersections"], 0);
+    assert_eq!(r["atlas"]["overlap_splits"], 0);
+    assert_eq!(r["atlas"]["injective_pieces"], 0);
+    assert!(r["global"]["scaffold_iterations"].as_u64().expect("n") > 0);
+
     let dir = TempDir::new("atlas_split");
     let r = check_atlas(
         &data("block"),
         &dir,
-        &["--solver", "global", "--energy", "sd"],
+        &[&args[..], &["--no-bijective"]].concat(),
         None,
     );
     assert_eq!(r["boundary_self_intersections"], 0);
-    let splits = r["atlas"]["overlap_splits"].as_u64().expect("splits");
-    assert!(splits >= 1);
+    assert!(r["atlas"]["overlap_splits"].as_u64().expect("splits") >= 1);
     assert!(r["atlas"]["charts"].as_u64().expect("charts") > 1);
+
     let dir0 = TempDir::new("atlas_nosplit");
+    let tuning = overlap_splits(&dir0, 0);
     let r0 = check_atlas(
         &data("block"),
         &dir0,
-        &[
-            "--solver",
-            "global",
-            "--energy",
-            "sd",
-            "--tuning",
-            &overlap_splits(&dir0, 0),
-        ],
+        &[&args[..], &["--no-bijective", "--tuning", &tuning]].concat(),
         Some(1),
     );
     assert!(r0["boundary_self_intersections"].as_u64().expect("n") > 0);
 }
 
-/// With a budget of one seam the block's chart still overlaps after it; the last resort cuts
+/// Unconstrained, with a budget of one seam the block's chart still overlaps after it; the last resort cuts
 /// what overlaps into pieces that keep their map: no crossing, no flip, the same energy
 /// as without any split (pieces are not re-mapped).
 #[test]
@@ -337,6 +304,7 @@ fn a_chart_still_overlapping_after_its_seams_is_cut_into_pieces() {
         "global",
         "--energy",
         "sd",
+        "--no-bijective",
         "--tuning",
         tuning.as_str(),
     ];

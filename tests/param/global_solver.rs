@@ -98,31 +98,39 @@ fn camel_sd_reaches_slim_quality_flip_free_with_monotone_descent() {
     }
 }
 
+/// Without progressive references every step lowers the true energy, with the scaffold on or
+/// off (the scaffold starts every step at its rest shape, zero gradient, so a step that lowers
+/// the sum cannot raise the chart's part); unconstrained, each iteration's objective starts
+/// where the last one ended.
 #[test]
 fn without_progressive_references_the_true_energy_decreases_monotonically() {
     let (m, _, frames, uv) = load("camel_open.obj");
-    let opts = GlobalOptions {
-        progressive_cap: None,
-        max_iters: 8,
-        ..GlobalOptions::for_energy(Energy::SymmetricDirichlet)
-    };
-    let (e0, _) =
-        global::objective_and_gradient(&m, &frames, Energy::SymmetricDirichlet, &uv).unwrap();
-    let r = global::solve(&m, &frames, &uv, &opts, &mut |_| {}).expect("solve");
-    let mut prev = e0;
-    for h in &r.history {
-        assert_eq!(h.capped_faces, 0);
-        assert!((h.objective_before - prev).abs() <= 1e-12 * prev);
-        assert!(
-            h.energy < prev,
-            "iteration {}: {} ≥ {prev}",
-            h.iteration,
-            h.energy
-        );
-        prev = h.energy;
+    for bijective in [false, true] {
+        let opts = GlobalOptions {
+            progressive_cap: None,
+            max_iters: 8,
+            bijective,
+            ..GlobalOptions::for_energy(Energy::SymmetricDirichlet)
+        };
+        let (e0, _) =
+            global::objective_and_gradient(&m, &frames, Energy::SymmetricDirichlet, &uv).unwrap();
+        let r = global::solve(&m, &frames, &uv, &opts, &mut |_| {}).expect("solve");
+        let mut prev = e0;
+        for h in &r.history {
+            assert_eq!(h.capped_faces, 0);
+            if !bijective {
+                assert!((h.objective_before - prev).abs() <= 1e-12 * prev);
+            }
+            assert!(
+                h.energy < prev,
+                "bijective {bijective}, iteration {}: {} ≥ {prev}",
+                h.iteration,
+                h.energy
+            );
+            prev = h.energy;
+        }
+        assert_eq!(r.stop, StopReason::MaxIterations);
     }
-    assert_eq!(r.iterations, 8);
-    assert_eq!(r.stop, StopReason::MaxIterations);
 }
 
 #[test]
@@ -330,6 +338,9 @@ fn admm_that_stops_short_hands_off_to_the_global_solver() {
             &topo,
             InitMethod::Lscm,
             SolverChoice::Admm,
+            // The unconstrained pipeline's promise (never worse than ADMM's best map); the
+            // bijective one may restart from Tutte (bijective_* tests below).
+            false,
             &opts,
             None,
             &mut |_| {},
@@ -351,4 +362,121 @@ fn admm_that_stops_short_hands_off_to_the_global_solver() {
         );
         assert!(out.stop_summary().contains("handed to the global solver"));
     }
+}
+
+/// Boundary crossings of a map, by brute force (tests/common/objcheck.rs).
+fn crossings(m: &TriMesh, uv: &[[f64; 2]]) -> usize {
+    let faces: Vec<[usize; 3]> = m.faces.iter().map(|f| f.map(|v| v as usize)).collect();
+    crate::common::objcheck::boundary_crossings(&faces, uv)
+}
+
+/// Bijective mode (SCAF, `GlobalOptions::bijective`, the default): from Tutte on camel_open
+/// the unconstrained MIPS optimum folds the boundary over itself; the bijective solve has no
+/// crossing, took steps with the scaffold on, and pays under 1 % of energy for it.
+#[test]
+fn bijective_solve_keeps_the_boundary_apart() {
+    let (m, _, frames, tutte) = load("camel_open.obj");
+    let free = GlobalOptions {
+        bijective: false,
+        ..GlobalOptions::for_energy(Energy::Mips)
+    };
+    let a = global::solve(&m, &frames, &tutte, &free, &mut |_| {}).expect("unconstrained");
+    let b = global::solve(
+        &m,
+        &frames,
+        &tutte,
+        &GlobalOptions::for_energy(Energy::Mips),
+        &mut |_| {},
+    )
+    .expect("bijective");
+    assert!(
+        crossings(&m, &a.uv) > 0,
+        "the unconstrained map should overlap"
+    );
+    assert_eq!(a.scaffold_iterations, 0);
+    assert_eq!(crossings(&m, &b.uv), 0);
+    assert!(b.scaffold_iterations > 0);
+    assert!(b.converged(), "{}", b.stop_summary());
+    assert_eq!(foldfree::init::count_flips(&m.faces, &b.uv), 0);
+    assert!(
+        b.energy <= 1.01 * a.energy,
+        "bijective {} vs unconstrained {}",
+        b.energy,
+        a.energy
+    );
+}
+
+/// The scaffold is joined lazily: a map that never nears overlap is the unconstrained
+/// solver's, bit for bit.
+#[test]
+fn bijective_solve_without_contact_is_the_unconstrained_one() {
+    let (m, _, frames, tutte) = load("square_grid_10x10.obj");
+    for energy in [Energy::Mips, Energy::SymmetricDirichlet] {
+        let free = GlobalOptions {
+            bijective: false,
+            ..GlobalOptions::for_energy(energy)
+        };
+        let a = global::solve(&m, &frames, &tutte, &free, &mut |_| {}).expect("unconstrained");
+        let b = global::solve(
+            &m,
+            &frames,
+            &tutte,
+            &GlobalOptions::for_energy(energy),
+            &mut |_| {},
+        )
+        .expect("bijective");
+        assert_eq!(b.scaffold_iterations, 0);
+        assert_eq!(a.uv, b.uv, "{energy:?}");
+    }
+}
+
+/// A start whose boundary already crosses itself is refused by the bijective solver (there is
+/// no scaffold around it), with a message saying so.
+#[test]
+fn bijective_solve_refuses_an_overlapping_start() {
+    let (m, _, frames, tutte) = load("camel_open.obj");
+    let free = GlobalOptions {
+        bijective: false,
+        ..GlobalOptions::for_energy(Energy::Mips)
+    };
+    let a = global::solve(&m, &frames, &tutte, &free, &mut |_| {}).expect("unconstrained");
+    assert!(crossings(&m, &a.uv) > 0);
+    let err = global::solve(
+        &m,
+        &frames,
+        &a.uv,
+        &GlobalOptions::for_energy(Energy::Mips),
+        &mut |_| {},
+    )
+    .expect_err("an overlapping start");
+    assert!(err.to_string().contains("crosses itself"), "{err}");
+}
+
+/// The CLI's default map of camel_open (ADMM, MIPS) is bijective in the written file; with
+/// `--no-bijective` it is ADMM's unconstrained map, whose boundary crosses itself.
+#[test]
+fn cli_default_map_is_bijective() {
+    let dir = TempDir::new("bijective_cli");
+    let input = crate::common::data_obj("camel_open");
+    let mut counts = Vec::new();
+    for extra in [&[][..], &["--no-bijective"][..]] {
+        let out = dir.join("out.obj");
+        let o = crate::common::foldfree(
+            &[
+                &["param", input.to_str().expect("utf-8"), "-o"][..],
+                &[out.to_str().expect("utf-8"), "-q", "--backend", "cpu"][..],
+                extra,
+            ]
+            .concat(),
+        );
+        crate::common::run::check_ok(&o, "foldfree param");
+        let text = std::fs::read_to_string(&out).expect("read");
+        let obj = crate::common::objcheck::parse_obj(&text).expect("parse");
+        counts.push(crate::common::objcheck::file_boundary_crossings(&obj));
+    }
+    assert_eq!(counts[0], 0, "default map overlaps");
+    assert!(
+        counts[1] > 0,
+        "the unconstrained map should overlap: {counts:?}"
+    );
 }

@@ -68,6 +68,7 @@ fn finger_map(energy: Energy) -> (TriMesh, Topology, foldfree::param::MapOutput)
         &t,
         InitMethod::Lscm,
         foldfree::param::SolverChoice::Admm,
+        true,
         &AdmmOptions::for_energy(energy),
         None,
         &mut |_| {},

@@ -95,12 +95,15 @@ pub struct ParamArgs {
     #[arg(long, value_name = "N", default_value_t = 1024,
           value_parser = clap::value_parser!(u32).range(16..=8192))]
     png_size: u32,
-    /// Write the convergence plot (residuals and energy against iteration) as SVG.
+    /// Write the convergence plot (residuals and energy against iteration): PNG when PATH
+    /// ends in .png, else SVG; may be given twice (one of each).
     #[arg(long, value_name = "PATH")]
-    plot: Option<PathBuf>,
-    /// Write the convergence plot as PNG.
-    #[arg(long, value_name = "PATH")]
-    plot_png: Option<PathBuf>,
+    plot: Vec<PathBuf>,
+    /// Let the boundary of a map overlap itself (the unconstrained optimum, locally injective
+    /// only): by default every map is bijective, the solver keeping each chart's boundary
+    /// apart with a scaffold (SCAF), and an atlas never needs splitting seams.
+    #[arg(long)]
+    no_bijective: bool,
 }
 
 pub fn run_param(args: ParamArgs) -> foldfree::Result<()> {
@@ -145,12 +148,13 @@ pub fn run_param(args: ParamArgs) -> foldfree::Result<()> {
         layout_svg: args.svg.clone(),
         layout_png: args.png.clone(),
         png_size: args.png_size,
-        plot_svg: args.plot.clone(),
-        plot_png: args.plot_png.clone(),
+        plot_svg: args.plot.iter().find(|p| !is_png(p)).cloned(),
+        plot_png: args.plot.iter().find(|p| is_png(p)).cloned(),
         ..Default::default()
     };
     job.init = init;
     job.solver = solver;
+    job.bijective = !args.no_bijective;
     // An ADMM iteration cap says the user wants ADMM on the charts too.
     job.atlas_solver = args.solver.unwrap_or(if admm_only {
         SolverChoice::Admm
@@ -227,3 +231,9 @@ Exit codes:
      the message and the report's `stop` say how far from it the run was
   2  bad input or usage (nothing written)
   1  anything else: Vulkan failure, I/O (nothing written)";
+
+/// Whether `path` names a PNG file (by extension, any case).
+fn is_png(path: &std::path::Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+}

@@ -103,8 +103,12 @@ pub struct Pattern {
 impl Pattern {
     /// Builds the pattern of `mesh`: vertex blocks for every pair that shares a face.
     pub fn new(mesh: &TriMesh) -> Result<Pattern, SolveError> {
-        let nv = mesh.positions.len();
-        let blocks = BlockPattern::new(nv, &mesh.faces);
+        Self::from_faces(mesh.positions.len(), &mesh.faces)
+    }
+
+    /// The pattern of `faces` over `nv` vertices (a chart with its scaffold).
+    pub fn from_faces(nv: usize, faces: &[[u32; 3]]) -> Result<Pattern, SolveError> {
+        let blocks = BlockPattern::new(nv, faces);
         let diag = (0..2 * nv)
             .map(|i| blocks.diag((i / 2) as u32, i % 2))
             .collect();
@@ -150,6 +154,26 @@ impl Pattern {
             total += shift;
         }
         total / self.diag.len().max(1) as f64
+    }
+
+    /// Fixes the unknowns from `first` on (the scaffold's frame): their rows and columns
+    /// become those of the identity, so with a zero right-hand side there the solve leaves them
+    /// in place and is the reduced system's on the others.
+    pub fn pin(&mut self, first: usize) {
+        let n = self.matrix.rows();
+        if first >= n {
+            return;
+        }
+        let blocks = &self.blocks;
+        let data = self.matrix.data_mut();
+        for row in 0..n {
+            for k in blocks.indptr[row]..blocks.indptr[row + 1] {
+                let col = blocks.indices[k];
+                if row >= first || col >= first {
+                    data[k] = if row == col { 1.0 } else { 0.0 };
+                }
+            }
+        }
     }
 }
 

@@ -13,6 +13,10 @@
 //! Cholesky, its symbolic analysis computed once ([`crate::linalg::direct`]), or by
 //! preconditioned CG ([`crate::linalg::krylov::KrylovSolver`], [`GlobalOptions::linear_solver`]).
 //!
+//! With [`GlobalOptions::bijective`] (the default) the map stays bijective: from the first step
+//! that would make the boundary cross itself, a scaffold of triangles fills the space around
+//! the chart and joins the solve ([`scaffold`], SCAF), so no iterate ever overlaps.
+//!
 //! Converged when the energy has stopped decreasing: its relative decrease per iteration over
 //! the last [`GlobalOptions::energy_window`] iterations is under [`GlobalOptions::energy_tol`]
 //! (see there why that is scale-free and enough), or no step decreases it any more (rounding
@@ -28,8 +32,10 @@ pub mod cm;
 pub mod line_search;
 pub mod progressive;
 pub mod proxy;
+pub mod scaffold;
 pub mod stop;
 
+use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -99,6 +105,12 @@ pub struct GlobalOptions {
     pub cg_max_iters: usize,
     /// Try the exact Hessian after a full Newton step was accepted.
     pub exact_newton: bool,
+    /// Keep the map bijective: no boundary of the chart crosses itself or another part of the
+    /// chart ([`scaffold`]). The start map must then have a simple boundary. The scaffold is
+    /// joined lazily, at the first step whose end overlaps (that step is not taken): until
+    /// then the iterates are those of the unconstrained solve, so a map that never comes
+    /// near overlapping costs nothing more and ends where the unconstrained one does.
+    pub bijective: bool,
     /// Raised by the caller (Ctrl-C) to stop after the current iteration.
     pub stop: Option<Arc<AtomicBool>>,
 }
@@ -128,6 +140,7 @@ impl GlobalOptions {
             cg_tol_newton: 1e-8,
             cg_max_iters: 2000,
             exact_newton: true,
+            bijective: true,
             stop: None,
         }
     }
@@ -166,7 +179,8 @@ pub enum StopReason {
 pub struct GlobalIteration {
     pub iteration: usize,
     pub phase: Phase,
-    /// Objective before and after the step (w.r.t. the references in use).
+    /// Objective before and after the step (w.r.t. the references in use; with the scaffold on,
+    /// its share included).
     pub objective_before: f64,
     pub objective_after: f64,
     /// True energy (rest references) after the step.
@@ -212,6 +226,9 @@ pub struct GlobalResult {
     pub energy_decrease: f64,
     pub energy_window: usize,
     pub energy_tol: f64,
+    /// Iterations taken with the scaffold on ([`GlobalOptions::bijective`]; 0: the map never
+    /// came near overlapping and is the unconstrained solver's).
+    pub scaffold_iterations: usize,
     pub totals: PhaseTotals,
     pub history: Vec<GlobalIteration>,
 }
@@ -244,22 +261,47 @@ impl GlobalResult {
     }
 }
 
-/// The fixed data of a solve.
-struct Problem<'a> {
+/// The data of a solve: the chart's faces, then (while the scaffold is on) the scaffold's.
+#[derive(Clone)]
+struct Problem {
     energy: Energy,
-    faces: &'a [[u32; 3]],
+    faces: Vec<[u32; 3]>,
     rest: Vec<FaceGradient>,
-    /// `area_f / total area`.
+    /// Chart faces: `area_f / total area`; scaffold faces: [`scaffold::WEIGHT`] times the
+    /// chart's energy, shared equally.
     weight: Vec<f64>,
+    /// Faces of the chart (the first ones); the rest are scaffold.
+    n_chart: usize,
+    /// Unknowns that move: the chart's 2·#V (the scaffold's frame, after them, is fixed).
+    free: usize,
     /// √(total 3D area): makes gradient norms scale-free.
     grad_scale: f64,
 }
 
-impl Problem<'_> {
+impl Problem {
+    /// The energy of face `i`: the chart's, or symmetric Dirichlet on the scaffold (a barrier
+    /// against collapse; MIPS is scale-invariant and would let a scaffold triangle shrink to
+    /// nothing).
+    fn energy_of(&self, i: usize) -> Energy {
+        if i < self.n_chart {
+            self.energy
+        } else {
+            Energy::SymmetricDirichlet
+        }
+    }
+
     /// `Σ w_f E(A_f)` under `grads`; +∞ if any face is flipped or degenerate.
     fn objective(&self, grads: &[FaceGradient], x: &[f64]) -> f64 {
         crate::linalg::ordered_sum(self.faces.len(), |i| {
-            self.weight[i] * energy::value(self.energy, &jacobian(&grads[i], &self.faces[i], x))
+            self.weight[i]
+                * energy::value(self.energy_of(i), &jacobian(&grads[i], &self.faces[i], x))
+        })
+    }
+
+    /// The objective of the chart alone at its rest triangles (the true energy).
+    fn chart_energy(&self, x: &[f64]) -> f64 {
+        crate::linalg::ordered_sum(self.n_chart, |i| {
+            self.weight[i] * energy::value(self.energy, &jacobian(&self.rest[i], &self.faces[i], x))
         })
     }
 
@@ -270,8 +312,9 @@ impl Problem<'_> {
             .par_iter()
             .zip(grads.par_iter())
             .zip(self.weight.par_iter())
-            .map(|((f, g), w)| {
-                let (_, ge, _) = energy::eval(self.energy, &jacobian(g, f, x));
+            .enumerate()
+            .map(|(i, ((f, g), w))| {
+                let (_, ge, _) = energy::eval(self.energy_of(i), &jacobian(g, f, x));
                 pull_back(g, &ge.map(|v| v * w))
             })
             .collect();
@@ -283,6 +326,19 @@ impl Problem<'_> {
             }
         }
         out
+    }
+
+    /// This chart problem with the scaffold `s` joined, for a chart of true energy `e`.
+    fn with_scaffold(&self, s: &scaffold::Scaffold, e: f64) -> Problem {
+        let mut p = self.clone();
+        p.faces.truncate(self.n_chart);
+        p.rest.truncate(self.n_chart);
+        p.weight.truncate(self.n_chart);
+        p.faces.extend_from_slice(&s.faces);
+        p.rest.extend_from_slice(&s.rest);
+        let w = scaffold::WEIGHT * e / s.faces.len().max(1) as f64;
+        p.weight.extend(std::iter::repeat_n(w, s.faces.len()));
+        p
     }
 }
 
@@ -307,7 +363,9 @@ pub fn objective_and_gradient(
     }
     let problem = Problem {
         energy,
-        faces: &mesh.faces,
+        faces: mesh.faces.clone(),
+        n_chart: mesh.faces.len(),
+        free: 2 * mesh.positions.len(),
         rest: face_gradients(frames)?,
         weight: frames.area.iter().map(|a| a / total).collect(),
         grad_scale: total.sqrt(),
@@ -365,28 +423,51 @@ pub fn solve(
             what: "the mesh has no area".into(),
         });
     }
-    let problem = Problem {
+    let chart = Problem {
         energy: opts.energy,
-        faces: &mesh.faces,
+        faces: mesh.faces.clone(),
+        n_chart: mesh.faces.len(),
+        free: 2 * mesh.positions.len(),
         rest: face_gradients(frames)?,
         weight: frames.area.iter().map(|a| a / total).collect(),
         grad_scale: total.sqrt(),
     };
-    let mut x: Vec<f64> = uv0.iter().flat_map(|p| [p[0], p[1]]).collect();
-    if !problem.objective(&problem.rest, &x).is_finite() {
+    // The chart's UVs; an iteration works on a copy, extended by the scaffold's frame.
+    let mut xc: Vec<f64> = uv0.iter().flat_map(|p| [p[0], p[1]]).collect();
+    if !chart.objective(&chart.rest, &xc).is_finite() {
         return Err(SolveError::InvalidInput {
             what: "the start map of the global solver has flipped, degenerate or non-finite faces"
                 .into(),
         });
     }
+    let boundary = opts
+        .bijective
+        .then(|| scaffold::boundary_edges(&mesh.faces));
+    if let Some(b) = &boundary {
+        if scaffold::Scaffold::build(&xc, nv, b).is_none() {
+            return Err(SolveError::InvalidInput {
+                what: "the start map of the bijective global solver has a boundary that touches \
+                       or crosses itself"
+                    .into(),
+            });
+        }
+    }
+    // Whether the scaffold is on (from the first step that would have overlapped).
+    let mut scaffolded = false;
+    // The scaffold while it is on, and whether to re-triangulate it before the next iteration.
+    let mut scaffold: Option<scaffold::Scaffold> = None;
+    let mut remesh = true;
+    let mut scaffold_iterations = 0;
     let mut pattern = Pattern::new(mesh)?;
+    // The scaffold's triangles, pattern and symbolic factorisation, while it is on.
+    let mut scaffold_system: Option<(Vec<[u32; 3]>, Pattern, Option<CholeskySymbolic>)> = None;
     // Sparse Cholesky's ordering and symbolic factorisation of the pattern, on first use.
     let mut symbolic: Option<CholeskySymbolic> = None;
     let mut history = Vec::new();
     let mut totals = PhaseTotals::default();
     let mut phase = Phase::Proxy;
     let mut progressive = opts.progressive_cap.is_some();
-    let mut d = vec![0.0; x.len()];
+    let mut d = Vec::new();
     let mut stop = StopReason::MaxIterations;
     let mut iterations = 0;
     let mut try_exact = false;
@@ -405,27 +486,74 @@ pub fn solve(
             break;
         }
         let t_it = Instant::now();
+        // The problem of this iteration: the chart, with the scaffold when it is on (its frame
+        // vertices appended to the unknowns, pinned). The scaffold is re-triangulated when the
+        // last step was limited by it (a scaffold triangle about to flip where the chart's
+        // boundary is not near contact is a poor triangulation, and the Delaunay one of the
+        // current boundary is the best there is); otherwise its triangles stay and only their
+        // rest shapes are reset to the current ones, so the pattern and the symbolic
+        // factorisation stay too.
+        if let (Some(b), true) = (&boundary, scaffolded) {
+            let kept = !remesh && scaffold.as_mut().is_some_and(|s| s.reset_rest(&xc, nv));
+            if !kept {
+                let s =
+                    scaffold::Scaffold::build(&xc, nv, b).ok_or_else(|| SolveError::Failed {
+                        what:
+                            "global solver: the chart's boundary touches itself under the scaffold"
+                                .into(),
+                    })?;
+                scaffold = Some(s);
+            }
+        }
+        let (problem, mut x) = match &scaffold {
+            Some(s) => (
+                Cow::Owned(chart.with_scaffold(s, chart.chart_energy(&xc))),
+                xc.iter()
+                    .copied()
+                    .chain(s.frame.iter().flatten().copied())
+                    .collect(),
+            ),
+            None => (Cow::Borrowed(&chart), xc.clone()),
+        };
+        // The scaffold's system: its pattern and symbolic factorisation are kept while the
+        // rebuilt scaffold has the same triangles (the usual case once the boundary moves
+        // little), since the ordering and symbolic analysis cost as much as a factorisation.
+        if let Some(s) = &scaffold {
+            if scaffold_system.as_ref().is_none_or(|c| c.0 != s.faces) {
+                let p = Pattern::from_faces(x.len() / 2, &problem.faces)?;
+                scaffold_system = Some((s.faces.clone(), p, None));
+            }
+        }
+        let (pattern, symbolic) = match (&scaffold, &mut scaffold_system) {
+            (Some(_), Some((_, p, s))) => (p, s),
+            _ => (&mut pattern, &mut symbolic),
+        };
+        d.clear();
+        d.resize(x.len(), 0.0);
         // References of this iteration.
-        let (grads, capped) = match (progressive, opts.progressive_cap) {
+        let (mut grads, capped) = match (progressive, opts.progressive_cap) {
             (true, Some(cap)) if it < opts.progressive_max_iters => {
-                let pairs: Vec<(FaceGradient, bool)> = problem
+                let pairs: Vec<(FaceGradient, bool)> = chart
                     .faces
                     .par_iter()
-                    .zip(problem.rest.par_iter())
+                    .zip(chart.rest.par_iter())
                     .map(|(f, g)| {
-                        progressive::capped_gradient(opts.energy, g, &jacobian(g, f, &x), cap)
+                        progressive::capped_gradient(opts.energy, g, &jacobian(g, f, &xc), cap)
                     })
                     .collect();
                 let capped = pairs.iter().filter(|p| p.1).count();
                 (pairs.into_iter().map(|p| p.0).collect::<Vec<_>>(), capped)
             }
-            _ => (problem.rest.clone(), 0),
+            _ => (chart.rest.clone(), 0),
         };
+        grads.extend_from_slice(&problem.rest[chart.n_chart..]);
         if capped == 0 {
             progressive = false;
         }
         let f0 = problem.objective(&grads, &x);
-        let g = problem.gradient(&grads, &x);
+        let mut g = problem.gradient(&grads, &x);
+        // The frame does not move.
+        g[2 * nv..].fill(0.0);
         let grad_norm = dot(&g, &g).sqrt() * problem.grad_scale;
         if stop_test.gradient_met(grad_norm, capped) {
             stop = StopReason::GradientTolerance;
@@ -448,16 +576,7 @@ pub fn solve(
         let mut slope = f64::NAN;
         if used == Phase::ExactNewton {
             match direction(
-                &problem,
-                &grads,
-                &x,
-                &g,
-                used,
-                &mut pattern,
-                &mut symbolic,
-                opts,
-                forcing,
-                &mut d,
+                &problem, &grads, &x, &g, used, pattern, symbolic, opts, forcing, &mut d,
             ) {
                 Ok((s, c)) => {
                     cg_iterations += c;
@@ -479,16 +598,7 @@ pub fn solve(
         }
         if used != Phase::ExactNewton {
             let (s, c) = direction(
-                &problem,
-                &grads,
-                &x,
-                &g,
-                used,
-                &mut pattern,
-                &mut symbolic,
-                opts,
-                forcing,
-                &mut d,
+                &problem, &grads, &x, &g, used, pattern, symbolic, opts, forcing, &mut d,
             )?;
             slope = s;
             cg_iterations += c;
@@ -501,8 +611,8 @@ pub fn solve(
                 &x,
                 &g,
                 Phase::Proxy,
-                &mut pattern,
-                &mut symbolic,
+                pattern,
+                symbolic,
                 opts,
                 forcing,
                 &mut d,
@@ -512,7 +622,7 @@ pub fn solve(
             used = Phase::Proxy;
         }
         let f = |y: &[f64]| problem.objective(&grads, y);
-        let mut max_step = line_search::max_flip_free(&grads, problem.faces, &x, &d);
+        let mut max_step = line_search::max_flip_free(&grads, &problem.faces, &x, &d);
         let t_start = (line_search::FLIP_FREE_FRACTION * max_step).min(1.0);
         let mut accepted = line_search::armijo(&f, &x, &d, f0, slope, t_start);
         if accepted.is_none() && used != Phase::Proxy {
@@ -524,15 +634,15 @@ pub fn solve(
                 &x,
                 &g,
                 Phase::Proxy,
-                &mut pattern,
-                &mut symbolic,
+                pattern,
+                symbolic,
                 opts,
                 forcing,
                 &mut d,
             )?;
             cg_iterations += c;
             used = Phase::Proxy;
-            max_step = line_search::max_flip_free(&grads, problem.faces, &x, &d);
+            max_step = line_search::max_flip_free(&grads, &problem.faces, &x, &d);
             let t_start = (line_search::FLIP_FREE_FRACTION * max_step).min(1.0);
             accepted = line_search::armijo(&f, &x, &d, f0, s, t_start);
         }
@@ -540,14 +650,38 @@ pub fn solve(
             stop = StopReason::Stalled;
             break;
         };
+        if scaffold.is_some() {
+            let n = chart.n_chart;
+            let chart_max = line_search::max_flip_free(&grads[..n], &problem.faces[..n], &x, &d);
+            remesh = line_search::FLIP_FREE_FRACTION * max_step < 1.0 && max_step < chart_max;
+        }
         x.par_iter_mut()
             .zip(d.par_iter())
             .for_each(|(xi, di)| *xi += acc.step * di);
+        if let Some(b) = &boundary {
+            let uv: &[[f64; 2]] = bytemuck::cast_slice(&x[..2 * nv]);
+            if crate::metrics::segment_intersections(uv, b) > 0 {
+                if scaffolded {
+                    // Cannot happen (every scaffold triangle stayed positive); should rounding
+                    // say otherwise, the last bijective map is the result.
+                    stop = StopReason::Stalled;
+                    break;
+                }
+                // The first step that would overlap is not taken: from here on the scaffold
+                // is on, and this iteration is done again with it.
+                scaffolded = true;
+                continue;
+            }
+        }
+        xc.copy_from_slice(&x[..2 * nv]);
+        if scaffold.is_some() {
+            scaffold_iterations += 1;
+        }
         iterations = it + 1;
-        let e_true = if capped == 0 {
+        let e_true = if capped == 0 && scaffold.is_none() {
             acc.value
         } else {
-            problem.objective(&problem.rest, &x)
+            chart.chart_energy(&xc)
         };
         let rel = (f0 - acc.value) / f0.abs().max(f64::MIN_POSITIVE);
         let secs = t_it.elapsed().as_secs_f64();
@@ -590,8 +724,7 @@ pub fn solve(
         // A reference that follows a few stubborn faces lets the surrogate fall while the
         // true energy rises: progressive references end once they are that few, or as soon as
         // the true energy went up.
-        if capped > 0 && (e_true > e_prev || capped * PROGRESSIVE_MIN_SHARE <= problem.faces.len())
-        {
+        if capped > 0 && (e_true > e_prev || capped * PROGRESSIVE_MIN_SHARE <= chart.n_chart) {
             progressive = false;
         }
         e_prev = e_true;
@@ -605,14 +738,14 @@ pub fn solve(
         }
     }
 
-    let energy = problem.objective(&problem.rest, &x);
-    let g = problem.gradient(&problem.rest, &x);
-    let grad_norm = dot(&g, &g).sqrt() * problem.grad_scale;
+    let energy = chart.objective(&chart.rest, &xc);
+    let g = chart.gradient(&chart.rest, &xc);
+    let grad_norm = dot(&g, &g).sqrt() * chart.grad_scale;
     if stop == StopReason::Stalled && grad_norm <= opts.grad_tol {
         // Stalled at rounding level after the last step already met the tolerance.
         stop = StopReason::GradientTolerance;
     }
-    let mut uv: Vec<[f64; 2]> = x.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+    let mut uv: Vec<[f64; 2]> = xc.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     if opts.energy == Energy::Mips {
         // MIPS has no scale: report the map at the 3D area, like the start map.
         crate::init::normalize_area(mesh, &mut uv, total);
@@ -637,6 +770,7 @@ pub fn solve(
         energy_decrease: stop_test.decrease(),
         energy_window: stop_test.window(),
         energy_tol: opts.energy_tol,
+        scaffold_iterations,
         totals,
         history,
     })
@@ -673,7 +807,8 @@ fn direction(
             pull_back_matrix(gr, &m)
         })
         .collect();
-    pattern.fill(problem.faces, &local, REL_SHIFT);
+    pattern.fill(&problem.faces, &local, REL_SHIFT);
+    pattern.pin(problem.free);
     let rhs: Vec<f64> = g.iter().map(|v| -v).collect();
     if opts.linear_solver == LinearSolver::Cholesky {
         if symbolic.is_none() {
