@@ -364,6 +364,21 @@ fn admm_that_stops_short_hands_off_to_the_global_solver() {
     }
 }
 
+/// `global::solve` from `uv` with the default options of `energy`, bijective or not.
+fn solve_from(
+    m: &TriMesh,
+    frames: &FaceFrames,
+    uv: &[[f64; 2]],
+    energy: Energy,
+    bijective: bool,
+) -> Result<global::GlobalResult, foldfree::linalg::SolveError> {
+    let opts = GlobalOptions {
+        bijective,
+        ..GlobalOptions::for_energy(energy)
+    };
+    global::solve(m, frames, uv, &opts, &mut |_| {})
+}
+
 /// Boundary crossings of a map, by brute force (tests/common/objcheck.rs).
 fn crossings(m: &TriMesh, uv: &[[f64; 2]]) -> usize {
     let faces: Vec<[usize; 3]> = m.faces.iter().map(|f| f.map(|v| v as usize)).collect();
@@ -376,19 +391,8 @@ fn crossings(m: &TriMesh, uv: &[[f64; 2]]) -> usize {
 #[test]
 fn bijective_solve_keeps_the_boundary_apart() {
     let (m, _, frames, tutte) = load("camel_open.obj");
-    let free = GlobalOptions {
-        bijective: false,
-        ..GlobalOptions::for_energy(Energy::Mips)
-    };
-    let a = global::solve(&m, &frames, &tutte, &free, &mut |_| {}).expect("unconstrained");
-    let b = global::solve(
-        &m,
-        &frames,
-        &tutte,
-        &GlobalOptions::for_energy(Energy::Mips),
-        &mut |_| {},
-    )
-    .expect("bijective");
+    let a = solve_from(&m, &frames, &tutte, Energy::Mips, false).expect("unconstrained");
+    let b = solve_from(&m, &frames, &tutte, Energy::Mips, true).expect("bijective");
     assert!(
         crossings(&m, &a.uv) > 0,
         "the unconstrained map should overlap"
@@ -412,19 +416,8 @@ fn bijective_solve_keeps_the_boundary_apart() {
 fn bijective_solve_without_contact_is_the_unconstrained_one() {
     let (m, _, frames, tutte) = load("square_grid_10x10.obj");
     for energy in [Energy::Mips, Energy::SymmetricDirichlet] {
-        let free = GlobalOptions {
-            bijective: false,
-            ..GlobalOptions::for_energy(energy)
-        };
-        let a = global::solve(&m, &frames, &tutte, &free, &mut |_| {}).expect("unconstrained");
-        let b = global::solve(
-            &m,
-            &frames,
-            &tutte,
-            &GlobalOptions::for_energy(energy),
-            &mut |_| {},
-        )
-        .expect("bijective");
+        let a = solve_from(&m, &frames, &tutte, energy, false).expect("unconstrained");
+        let b = solve_from(&m, &frames, &tutte, energy, true).expect("bijective");
         assert_eq!(b.scaffold_iterations, 0);
         assert_eq!(a.uv, b.uv, "{energy:?}");
     }
@@ -435,20 +428,9 @@ fn bijective_solve_without_contact_is_the_unconstrained_one() {
 #[test]
 fn bijective_solve_refuses_an_overlapping_start() {
     let (m, _, frames, tutte) = load("camel_open.obj");
-    let free = GlobalOptions {
-        bijective: false,
-        ..GlobalOptions::for_energy(Energy::Mips)
-    };
-    let a = global::solve(&m, &frames, &tutte, &free, &mut |_| {}).expect("unconstrained");
+    let a = solve_from(&m, &frames, &tutte, Energy::Mips, false).expect("unconstrained");
     assert!(crossings(&m, &a.uv) > 0);
-    let err = global::solve(
-        &m,
-        &frames,
-        &a.uv,
-        &GlobalOptions::for_energy(Energy::Mips),
-        &mut |_| {},
-    )
-    .expect_err("an overlapping start");
+    let err = solve_from(&m, &frames, &a.uv, Energy::Mips, true).expect_err("overlapping start");
     assert!(err.to_string().contains("crosses itself"), "{err}");
 }
 

@@ -298,13 +298,6 @@ impl Problem {
         })
     }
 
-    /// The objective of the chart alone at its rest triangles (the true energy).
-    fn chart_energy(&self, x: &[f64]) -> f64 {
-        crate::linalg::ordered_sum(self.n_chart, |i| {
-            self.weight[i] * energy::value(self.energy, &jacobian(&self.rest[i], &self.faces[i], x))
-        })
-    }
-
     /// Gradient of the objective under `grads` (2·#V).
     fn gradient(&self, grads: &[FaceGradient], x: &[f64]) -> Vec<f64> {
         let local: Vec<[f64; 6]> = self
@@ -328,12 +321,10 @@ impl Problem {
         out
     }
 
-    /// This chart problem with the scaffold `s` joined, for a chart of true energy `e`.
+    /// This chart problem (no scaffold yet) with the scaffold `s` joined, for a chart of true
+    /// energy `e`.
     fn with_scaffold(&self, s: &scaffold::Scaffold, e: f64) -> Problem {
         let mut p = self.clone();
-        p.faces.truncate(self.n_chart);
-        p.rest.truncate(self.n_chart);
-        p.weight.truncate(self.n_chart);
         p.faces.extend_from_slice(&s.faces);
         p.rest.extend_from_slice(&s.rest);
         let w = scaffold::WEIGHT * e / s.faces.len().max(1) as f64;
@@ -507,7 +498,7 @@ pub fn solve(
         }
         let (problem, mut x) = match &scaffold {
             Some(s) => (
-                Cow::Owned(chart.with_scaffold(s, chart.chart_energy(&xc))),
+                Cow::Owned(chart.with_scaffold(s, chart.objective(&chart.rest, &xc))),
                 xc.iter()
                     .copied()
                     .chain(s.frame.iter().flatten().copied())
@@ -681,7 +672,7 @@ pub fn solve(
         let e_true = if capped == 0 && scaffold.is_none() {
             acc.value
         } else {
-            chart.chart_energy(&xc)
+            chart.objective(&chart.rest, &xc)
         };
         let rel = (f0 - acc.value) / f0.abs().max(f64::MIN_POSITIVE);
         let secs = t_it.elapsed().as_secs_f64();

@@ -25,13 +25,16 @@ use super::assembly::FaceGradient;
 
 /// Total weight of the scaffold relative to the chart's energy (SCAF's published choice: each
 /// of the `n` scaffold triangles weighs `E / (100 n)` for a chart of mean energy `E` and unit
-/// total weight). The scaffold's gradient is zero at its rest shape, so the weight sets how
-/// stiffly it resists the boundary's motion within one step, and its barrier (infinite at
-/// contact whatever the weight) keeps the boundary apart. Equal weights make the small
-/// triangles along the boundary the stiffest: they hold boundary parts apart before they come
-/// close, where a scaffold of uniform stiffness (weights ∝ area, tried) let them approach
-/// until the barrier's slivers limited every step to a crawl (the 17.8k-face cheese of the
-/// corpus hit the iteration cap at SD 6·10⁶; male_2 and cgal_man took 1–3× the iterations).
+/// total weight; scale-free, as `E` is a mean of a dimensionless energy). The scaffold's
+/// gradient is zero at its rest shape, so the weight sets only how stiffly it resists the
+/// boundary's motion within one step; its barrier (infinite at contact whatever the weight)
+/// keeps the boundary apart. With equal weights a triangle's stiffness grows as its area
+/// shrinks, so it is greatest exactly where boundary parts are close (the scaffold triangles
+/// between them are small) and the scaffold resists an approach before the barrier's
+/// singularity is reached. Weights proportional to area (uniform stiffness) resist nothing
+/// until the last sliver, whose flip then bounds every step: tried, it took more iterations
+/// (up to the iteration cap) where boundary parts came close (BENCHMARKS.md, "Bijective
+/// maps"); SCAF's weights are what ran over the whole atlas and disk corpus.
 pub const WEIGHT: f64 = 0.01;
 
 /// Half-size of the frame square over the largest half-extent of the chart's boundary, as
