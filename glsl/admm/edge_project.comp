@@ -1,8 +1,10 @@
 #version 450
 // ADMM edge step (CPU twin: kernels::edge_project). For interior edge i with slots 2i, 2i+1
-// and face penalties μ_k = μ m_fk: Q_k = A_fk − Λ_k/μ_k, r = Q1 ê1 − Q2 ê2,
-// Y1 = Q1 − μ2/(μ1+μ2) r ê1ᵀ, Y2 = Q2 + μ1/(μ1+μ2) r ê2ᵀ (the projection onto Y1 ê1 = Y2 ê2,
-// unit ê_k in each face's own frame, in the metric of the two penalties).
+// and face penalties μ_k = μ m_fk: Q_k = A_fk − Λ_k/μ_k, r = Q1 e1 − Q2 e2,
+// D = μ2‖e1‖² + μ1‖e2‖², Y1 = Q1 − (μ2/D) r e1ᵀ, Y2 = Q2 + (μ1/D) r e2ᵀ (the projection onto
+// Y1 e1 = Y2 e2 in the metric of the two penalties; e_k is the edge in face k's own frame over a
+// length common to both sides: unit between two faces of a surface, not between a chart face
+// and a scaffold face).
 // Bindings: 0 A vec4[F], 1 Y vec4[S] (written), 2 Λ vec4[S], 3 slot_face uint[S], 4 slot_dir vec2[S],
 //           5 penalty float[F] (m_f).
 // One thread per interior edge, workgroups of 64.
@@ -41,8 +43,9 @@ void main() {
     vec2 e2 = slot_dir[s2];
     vec2 r = vec2(q1.x * e1.x + q1.y * e1.y - q2.x * e2.x - q2.y * e2.y,
                   q1.z * e1.x + q1.w * e1.y - q2.z * e2.x - q2.w * e2.y);
-    float t1 = mu2 / (mu1 + mu2);
-    float t2 = mu1 / (mu1 + mu2);
+    float den = mu2 * dot(e1, e1) + mu1 * dot(e2, e2);
+    float t1 = mu2 / den;
+    float t2 = mu1 / den;
     Y[s1] = q1 - t1 * vec4(r.x * e1.x, r.x * e1.y, r.y * e1.x, r.y * e1.y);
     Y[s2] = q2 + t2 * vec4(r.x * e2.x, r.x * e2.y, r.y * e2.x, r.y * e2.y);
 }

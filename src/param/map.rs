@@ -23,7 +23,7 @@ use serde::Serialize;
 use crate::init::{initial_map, normalize_area, InitMethod, TutteWeights};
 use crate::mesh::{self, Topology, TriMesh};
 use crate::param::admm::{self, AdmmOptions, AdmmProblem, History};
-use crate::param::global::{self, GlobalOptions};
+use crate::param::global::{self, scaffold, GlobalOptions};
 use crate::Result;
 
 /// Which solver runs after the start map.
@@ -316,9 +316,10 @@ pub fn compute_map(
             } else {
                 None
             };
+            let admm_start = uv.clone();
             let result = run_admm(
                 &problem,
-                mesh,
+                &mesh.faces,
                 &uv,
                 fallback.as_deref(),
                 opts,
@@ -339,22 +340,55 @@ pub fn compute_map(
                     progress,
                 )?;
             }
+            let overlaps = !simple(&uv) && !result.interrupted();
             out.admm = Some(result);
-            if !simple(&uv) && !out.admm.as_ref().is_some_and(|r| r.interrupted()) {
+            if overlaps {
                 // ADMM's per-face steps know nothing of the boundary: a map whose boundary
-                // overlaps goes to the bijective global solver, from the start map when that
-                // is an embedding, else from Tutte's.
-                let mut start = initial_map(mesh, topo, init)?;
-                normalize_area(mesh, &mut start, area_3d);
-                let folded = crate::init::count_flips(&mesh.faces, &start) > 0;
-                finish_globally(
-                    &mut start,
-                    folded,
-                    SolverPath::AdmmGlobal,
-                    &mut out,
-                    progress,
-                )?;
-                uv = start;
+                // overlaps is made again with the scaffold's triangles as more faces of the
+                // same iteration (on the same device), from ADMM's start map when that is an
+                // embedding, else from Tutte's; when that run stops short, the bijective
+                // global solver finishes from its best map.
+                let flip_free = crate::init::count_flips(&mesh.faces, &admm_start) == 0;
+                let start = if flip_free && simple(&admm_start) && finite(&admm_start) {
+                    admm_start
+                } else {
+                    tutte_map(mesh, topo, area_3d, &finite)?
+                };
+                let first = out.admm.take().expect("the ADMM run");
+                match run_admm_scaffolded(&problem, mesh, &start, opts, device, progress, &mut out)?
+                {
+                    Some(mut r) if r.flips == 0 && simple(&r.uv) => {
+                        // The scaffold kept its start's triangles, which bounds how far the
+                        // boundary could slide; the global solver, whose scaffold follows the
+                        // map, finishes (a few iterations where nothing was bound).
+                        uv.clone_from(&r.uv);
+                        r.iterations += first.iterations;
+                        let interrupted = r.interrupted();
+                        out.admm = Some(r);
+                        out.path = SolverPath::Admm;
+                        if !interrupted {
+                            finish_globally(
+                                &mut uv,
+                                false,
+                                SolverPath::AdmmGlobal,
+                                &mut out,
+                                progress,
+                            )?;
+                        }
+                    }
+                    _ => {
+                        out.admm = Some(first);
+                        let mut start = start;
+                        finish_globally(
+                            &mut start,
+                            false,
+                            SolverPath::AdmmGlobal,
+                            &mut out,
+                            progress,
+                        )?;
+                        uv = start;
+                    }
+                }
             }
         }
         SolverChoice::Global => {
@@ -387,11 +421,44 @@ pub fn compute_map(
     Ok(out)
 }
 
+/// ADMM from the embedding `start` with SCAF's scaffold around it joined as more faces
+/// ([`AdmmProblem::with_scaffold`]) on the same backend: a map ADMM keeps as its best has no
+/// flipped face, chart or scaffold, so its boundary does not overlap. The scaffold keeps the
+/// triangles and rest shapes of the start (ADMM's per-face state lives on them; rebuilding
+/// would restart it), so its stiffness is pure bias here, never reset as in the global
+/// solver: it gets the smallest weight, [`scaffold::WEIGHT_MIN`] of the chart's energy, and
+/// only its faces' flip-free steps keep the boundary apart. `None` when the scaffold cannot
+/// be built (a start whose boundary touches itself). The result's map is the chart's (#V).
+fn run_admm_scaffolded(
+    problem: &AdmmProblem,
+    mesh: &TriMesh,
+    start: &[[f64; 2]],
+    opts: &AdmmOptions,
+    device: Option<&OnDevice<'_>>,
+    progress: &mut dyn FnMut(Progress<'_>),
+    out: &mut MapOutput,
+) -> Result<Option<admm::AdmmResult>> {
+    let nv = mesh.positions.len();
+    let boundary = scaffold::boundary_edges(&mesh.faces);
+    let Some(s) = scaffold::Scaffold::build(bytemuck::cast_slice(start), nv, &boundary) else {
+        return Ok(None);
+    };
+    let (e0, _) = admm::driver::map_energy(problem, &mesh.faces, start, opts.energy);
+    let weight = scaffold::WEIGHT_MIN * e0 / s.faces.len().max(1) as f64;
+    let mut uv = start.to_vec();
+    uv.extend_from_slice(&s.frame);
+    let faces: Vec<[u32; 3]> = mesh.faces.iter().chain(&s.faces).copied().collect();
+    let joined = problem.with_scaffold(&mesh.faces, &s.faces, &uv, weight);
+    let mut r = run_admm(&joined, &faces, &uv, None, opts, device, progress, out)?;
+    r.uv.truncate(nv);
+    Ok(Some(r))
+}
+
 /// ADMM on `ctx` (Vulkan) or on the CPU; device times and validation messages go into `out`.
 #[allow(clippy::too_many_arguments)]
 fn run_admm(
     problem: &AdmmProblem,
-    mesh: &TriMesh,
+    faces: &[[u32; 3]],
     uv: &[[f64; 2]],
     fallback: Option<&[[f64; 2]]>,
     opts: &AdmmOptions,
@@ -400,7 +467,7 @@ fn run_admm(
     out: &mut MapOutput,
 ) -> Result<admm::AdmmResult> {
     let mut solve = |exec: &mut dyn admm::driver::Executor| {
-        admm::solve(problem, &mesh.faces, uv, fallback, opts, exec, &mut |h| {
+        admm::solve(problem, faces, uv, fallback, opts, exec, &mut |h| {
             progress(Progress::Admm(h))
         })
     };

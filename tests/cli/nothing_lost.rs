@@ -738,6 +738,12 @@ fn camel_uv_at_scale(dir: &TempDir, s: f64, tag: &str) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// The tolerance is relative to the map's size: a scale of 1e±100 is not a power of two, so the
+/// positions the solver sees at unit scale differ from the unit mesh's in their last bits, and
+/// ~70 iterations of two solvers (ADMM, then the bijective global solver's Newton steps with
+/// a scaffold whose weight goes down to 1e-8 of the energy) amplify that to ~5e-9 of the size
+/// (measured; the same iterations and stop on both). A scale that leaked into the solver would
+/// move the map by orders of magnitude more.
 #[test]
 fn meshes_at_any_scale_give_the_unit_scale_map_scaled() {
     let dir = TempDir::new("scale");
@@ -752,7 +758,7 @@ fn meshes_at_any_scale_give_the_unit_scale_map_scaled() {
             .map(|(a, b)| (a[0] / s - b[0]).abs().max((a[1] / s - b[1]).abs()))
             .fold(0.0f64, f64::max);
         assert!(
-            worst <= 1e-9 * size,
+            worst <= 1e-7 * size,
             "scale {s:e}: UVs differ by {worst:e} (size {size})"
         );
     }

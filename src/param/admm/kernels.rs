@@ -195,9 +195,12 @@ pub fn face_newton(
 }
 
 /// Edge step twin of `glsl/admm/edge_project.comp`: projection of `Q_k = A_k − Λ_k/μ_k` onto
-/// the consensus constraint `Y1 ê1 = Y2 ê2` (ê unit) in the metric `μ1‖·‖² + μ2‖·‖²` of the two
-/// sides' penalties: `r = Q1ê1 − Q2ê2`, `Y1 = Q1 − μ2/(μ1+μ2) r ê1ᵀ`, `Y2 = Q2 + μ1/(μ1+μ2) r ê2ᵀ`
-/// (the side with the stiffer penalty moves less; equal penalties split `r` in halves).
+/// the consensus constraint `Y1 e1 = Y2 e2` in the metric `μ1‖·‖² + μ2‖·‖²` of the two sides'
+/// penalties: with `r = Q1e1 − Q2e2` and `D = μ2‖e1‖² + μ1‖e2‖²`, `Y1 = Q1 − (μ2/D) r e1ᵀ`,
+/// `Y2 = Q2 + (μ1/D) r e2ᵀ` (Lagrange: `μ_k (Y_k − Q_k)` is `∓λ e_kᵀ`; the side with the stiffer
+/// penalty moves less, equal penalties and unit `e` split `r` in halves). Between two faces of
+/// one surface `e_k` is the unit edge vector; an edge between a chart face and a scaffold face
+/// ([`super::AdmmProblem::with_scaffold`]) has rest lengths that differ, hence the general `e`.
 pub fn edge_project(
     a1: &[f64; 4],
     a2: &[f64; 4],
@@ -214,7 +217,8 @@ pub fn edge_project(
         q1[0] * e1[0] + q1[1] * e1[1] - q2[0] * e2[0] - q2[1] * e2[1],
         q1[2] * e1[0] + q1[3] * e1[1] - q2[2] * e2[0] - q2[3] * e2[1],
     ];
-    let (t1, t2) = (mu2 / (mu1 + mu2), mu1 / (mu1 + mu2));
+    let den = mu2 * (e1[0] * e1[0] + e1[1] * e1[1]) + mu1 * (e2[0] * e2[0] + e2[1] * e2[1]);
+    let (t1, t2) = (mu2 / den, mu1 / den);
     let y1 = [
         q1[0] - t1 * r[0] * e1[0],
         q1[1] - t1 * r[0] * e1[1],
@@ -364,6 +368,35 @@ mod tests {
         let m1 = [y1[0] * e1[0] + y1[1] * e1[1], y1[2] * e1[0] + y1[3] * e1[1]];
         let m2 = [y2[0] * e2[0] + y2[1] * e2[1], y2[2] * e2[0] + y2[3] * e2[1]];
         assert!((m1[0] - m2[0]).abs() < 1e-14 && (m1[1] - m2[1]).abs() < 1e-14);
+    }
+
+    #[test]
+    fn edge_projection_with_unequal_edge_lengths_is_the_weighted_projection() {
+        // A chart face (unit ê) against a scaffold face whose rest edge is 2.5× longer.
+        let (e1, e2) = ([0.6, 0.8], [-2.0, 1.5]);
+        let (q1, q2) = ([1.0, 0.2, 0.3, 0.9], [0.5, -0.1, 0.4, 1.2]);
+        let (mu1, mu2) = (10.0, 0.3);
+        let (y1, y2) = edge_project(&q1, &q2, &[0.0; 4], &[0.0; 4], &e1, &e2, mu1, mu2);
+        let m1 = [y1[0] * e1[0] + y1[1] * e1[1], y1[2] * e1[0] + y1[3] * e1[1]];
+        let m2 = [y2[0] * e2[0] + y2[1] * e2[1], y2[2] * e2[0] + y2[3] * e2[1]];
+        assert!((m1[0] - m2[0]).abs() < 1e-14 && (m1[1] - m2[1]).abs() < 1e-14);
+        // Optimality: no feasible direction lowers μ1‖Y1 − Q1‖² + μ2‖Y2 − Q2‖². Feasible
+        // directions (D1, D2) have D1 e1 = D2 e2; the objective's gradient must be orthogonal
+        // to them, i.e. μ1 (Y1 − Q1) = −λ e1ᵀ and μ2 (Y2 − Q2) = λ e2ᵀ for one λ.
+        let g1: [f64; 4] = std::array::from_fn(|i| mu1 * (y1[i] - q1[i]));
+        let g2: [f64; 4] = std::array::from_fn(|i| mu2 * (y2[i] - q2[i]));
+        let lam = [-g1[0] / e1[0], -g1[2] / e1[0]];
+        for (g, e, s) in [(g1, e1, -1.0), (g2, e2, 1.0)] {
+            let want = [
+                s * lam[0] * e[0],
+                s * lam[0] * e[1],
+                s * lam[1] * e[0],
+                s * lam[1] * e[1],
+            ];
+            for i in 0..4 {
+                assert!((g[i] - want[i]).abs() < 1e-12, "{g:?} vs {want:?}");
+            }
+        }
     }
 
     #[test]

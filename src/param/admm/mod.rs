@@ -50,7 +50,8 @@ pub struct AdmmProblem {
     pub slot_dir: Vec<[f64; 2]>,
     /// #F×3: local 2D coordinates of each face's corners (corner 0 at the origin).
     pub local: Vec<[[f64; 2]; 3]>,
-    /// #F: face areas (3D).
+    /// #F: each face's weight in the least-squares recovery: its 3D area (a scaffold face:
+    /// its energy weight at the chart's area scale, see [`AdmmProblem::with_scaffold`]).
     pub area: Vec<f64>,
 }
 
@@ -90,6 +91,91 @@ impl AdmmProblem {
             local: frames.local.clone(),
             area: frames.area.clone(),
         }
+    }
+
+    /// This chart problem with SCAF's scaffold joined ([`crate::param::global::scaffold`]):
+    /// the triangles `scaffold` (over the chart's boundary vertices and the frame's vertices,
+    /// indices from #V on) become faces after the chart's `chart_faces`, at rest in the map `uv`
+    /// (chart and frame), so each starts at the identity; each gets the energy `weight` and
+    /// the same weight in the recovery (its `area` is `weight` times the chart's area, the
+    /// scale of the chart's own weights), so the scaffold neither pulls the chart's energy
+    /// nor its recovery while its faces, like every face, never flip. Their edges become
+    /// interior edges with two slots each, after the chart's (whose numbers stay): the
+    /// chart's boundary edges (a chart face on one side) and the scaffold's own; the frame's
+    /// outer edges stay boundary. An edge's direction is divided by its length in its lower
+    /// face (the chart face where there is one), a length common to both sides, so that the
+    /// consensus `Y1 e1 = Y2 e2` says the edge maps to one UV vector although its rest lengths
+    /// (3D on the chart, UV on the scaffold) differ.
+    pub fn with_scaffold(
+        &self,
+        chart_faces: &[[u32; 3]],
+        scaffold: &[[u32; 3]],
+        uv: &[[f64; 2]],
+        weight: f64,
+    ) -> AdmmProblem {
+        let nc = chart_faces.len();
+        let total: f64 = self.area[..nc].iter().sum();
+        let mut p = self.clone();
+        for f in scaffold {
+            let [o, a, b] = f.map(|v| uv[v as usize]);
+            p.local.push([
+                [0.0; 2],
+                [a[0] - o[0], a[1] - o[1]],
+                [b[0] - o[0], b[1] - o[1]],
+            ]);
+            p.weight.push(weight);
+            p.area.push(weight * total);
+            p.face_slots.push([NO_SLOT; 3]);
+        }
+        let face = |f: usize| {
+            if f < nc {
+                chart_faces[f]
+            } else {
+                scaffold[f - nc]
+            }
+        };
+        let key = |a: u32, b: u32| (a.min(b), a.max(b));
+        // The faces on each side of every scaffold edge (chart faces: along the boundary).
+        let mut sides: std::collections::BTreeMap<(u32, u32), Vec<usize>> = Default::default();
+        for f in nc..nc + scaffold.len() {
+            let t = face(f);
+            for k in 0..3 {
+                sides.entry(key(t[k], t[(k + 1) % 3])).or_default().push(f);
+            }
+        }
+        for (f, t) in chart_faces.iter().enumerate() {
+            for k in 0..3 {
+                if let Some(fs) = sides.get_mut(&key(t[k], t[(k + 1) % 3])) {
+                    fs.insert(0, f);
+                }
+            }
+        }
+        for ((lo, hi), fs) in sides {
+            if fs.len() != 2 {
+                continue;
+            }
+            let edge = |f: usize| {
+                let t = face(f);
+                let c = |v: u32| t.iter().position(|&x| x == v).expect("edge of the face");
+                let l = &p.local[f];
+                let (a, b) = (l[c(lo)], l[c(hi)]);
+                [b[0] - a[0], b[1] - a[1]]
+            };
+            let r = edge(fs[0]);
+            let len = (r[0] * r[0] + r[1] * r[1]).sqrt();
+            for &f in &fs {
+                let d = edge(f);
+                let s = p.slot_face.len() as u32;
+                p.slot_face.push(f as u32);
+                p.slot_dir.push([d[0] / len, d[1] / len]);
+                let free = p.face_slots[f]
+                    .iter_mut()
+                    .find(|x| **x == NO_SLOT)
+                    .expect("a face has at most three edges");
+                *free = s;
+            }
+        }
+        p
     }
 
     pub fn n_faces(&self) -> usize {

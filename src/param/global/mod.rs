@@ -321,13 +321,13 @@ impl Problem {
         out
     }
 
-    /// This chart problem (no scaffold yet) with the scaffold `s` joined, for a chart of true
-    /// energy `e`.
-    fn with_scaffold(&self, s: &scaffold::Scaffold, e: f64) -> Problem {
+    /// This chart problem (no scaffold yet) with the scaffold `s` joined at total weight
+    /// `weight` ([`scaffold::WEIGHT`]) of the chart's true energy `e`.
+    fn with_scaffold(&self, s: &scaffold::Scaffold, e: f64, weight: f64) -> Problem {
         let mut p = self.clone();
         p.faces.extend_from_slice(&s.faces);
         p.rest.extend_from_slice(&s.rest);
-        let w = scaffold::WEIGHT * e / s.faces.len().max(1) as f64;
+        let w = weight * e / s.faces.len().max(1) as f64;
         p.weight.extend(std::iter::repeat_n(w, s.faces.len()));
         p
     }
@@ -448,6 +448,8 @@ pub fn solve(
     // The scaffold while it is on, and whether to re-triangulate it before the next iteration.
     let mut scaffold: Option<scaffold::Scaffold> = None;
     let mut remesh = true;
+    // The scaffold's weight (adapted per step, [`scaffold::next_weight`]); SCAF's at contact.
+    let mut scaffold_weight = scaffold::WEIGHT;
     let mut scaffold_iterations = 0;
     let mut pattern = Pattern::new(mesh)?;
     // The scaffold's triangles, pattern and symbolic factorisation, while it is on.
@@ -498,7 +500,11 @@ pub fn solve(
         }
         let (problem, mut x) = match &scaffold {
             Some(s) => (
-                Cow::Owned(chart.with_scaffold(s, chart.objective(&chart.rest, &xc))),
+                Cow::Owned(chart.with_scaffold(
+                    s,
+                    chart.objective(&chart.rest, &xc),
+                    scaffold_weight,
+                )),
                 xc.iter()
                     .copied()
                     .chain(s.frame.iter().flatten().copied())
@@ -645,6 +651,7 @@ pub fn solve(
             let n = chart.n_chart;
             let chart_max = line_search::max_flip_free(&grads[..n], &problem.faces[..n], &x, &d);
             remesh = line_search::FLIP_FREE_FRACTION * max_step < 1.0 && max_step < chart_max;
+            scaffold_weight = scaffold::next_weight(scaffold_weight, remesh);
         }
         x.par_iter_mut()
             .zip(d.par_iter())

@@ -23,19 +23,45 @@ use spade::{ConstrainedDelaunayTriangulation, HasPosition, Point2, Triangulation
 
 use super::assembly::FaceGradient;
 
-/// Total weight of the scaffold relative to the chart's energy (SCAF's published choice: each
-/// of the `n` scaffold triangles weighs `E / (100 n)` for a chart of mean energy `E` and unit
-/// total weight; scale-free, as `E` is a mean of a dimensionless energy). The scaffold's
-/// gradient is zero at its rest shape, so the weight sets only how stiffly it resists the
-/// boundary's motion within one step; its barrier (infinite at contact whatever the weight)
-/// keeps the boundary apart. With equal weights a triangle's stiffness grows as its area
-/// shrinks, so it is greatest exactly where boundary parts are close (the scaffold triangles
-/// between them are small) and the scaffold resists an approach before the barrier's
-/// singularity is reached. Weights proportional to area (uniform stiffness) resist nothing
-/// until the last sliver, whose flip then bounds every step: tried, it took more iterations
-/// (up to the iteration cap) where boundary parts came close (BENCHMARKS.md, "Bijective
-/// maps"); SCAF's weights are what ran over the whole atlas and disk corpus.
+/// Largest total weight of the scaffold relative to the chart's energy (SCAF's published
+/// choice: each of the `n` scaffold triangles weighs `W E / n`, `W = 1/100`, for a chart of mean
+/// energy `E` and unit total weight; scale-free, as `E` is a mean of a dimensionless energy).
+/// With equal weights a triangle's stiffness grows as its area shrinks, so it is greatest
+/// exactly where boundary parts are close (the scaffold triangles between them are small).
+///
+/// The scaffold's gradient is zero at its rest shape (reset before every step), so at a
+/// fixed point of the iteration the weight has no effect on the map: it only sets how stiffly
+/// the scaffold resists the boundary's motion within one step, a proximal term that slows
+/// every mode of the chart it couples to, contact or not, while its barrier (infinite at
+/// collapse whatever the weight) and the flip-free step bound keep the boundary apart. So the
+/// solver adapts `W` as an interior-point method adapts its barrier parameter
+/// ([`next_weight`]): stiffer while contact bounds the steps (the Newton model then sees the
+/// contact and slides along it instead of being cut short at it), softer while it does not.
+/// Measured on the whole corpus against SCAF's fixed weight (BENCHMARKS.md, "Bijective maps"):
+/// fixed `1/100` spends most iterations on that proximal drag (bunny: 135 scaffold iterations
+/// where the unconstrained solve needs 26), a fixed `1e-6` most on steps cut short at contact
+/// (cgal_cheese: 647 instead of 304).
 pub const WEIGHT: f64 = 0.01;
+
+/// Smallest scaffold weight: the scaffold's share of the objective (`4 W E` at rest) stays
+/// ~1e-8 of it, far above rounding, so its barrier is still there, while its stiffness is too
+/// small to hold the chart back.
+pub const WEIGHT_MIN: f64 = 1e-8;
+
+/// Factor by which the scaffold weight changes per step (one decade: from the softest to
+/// the stiffest weight in six steps of contact).
+pub const WEIGHT_STEP: f64 = 10.0;
+
+/// The scaffold weight for the next step after a step at `w`: ×[`WEIGHT_STEP`] when a
+/// scaffold triangle bounded the step (`limited`), ÷[`WEIGHT_STEP`] when it did not, within
+/// [`WEIGHT_MIN`]..=[`WEIGHT`].
+pub fn next_weight(w: f64, limited: bool) -> f64 {
+    if limited {
+        (w * WEIGHT_STEP).min(WEIGHT)
+    } else {
+        (w / WEIGHT_STEP).max(WEIGHT_MIN)
+    }
+}
 
 /// Half-size of the frame square over the largest half-extent of the chart's boundary, as
 /// in SCAF: far enough that the chart never reaches it within a step (the triangles between
