@@ -267,8 +267,8 @@ struct Problem {
     energy: Energy,
     faces: Vec<[u32; 3]>,
     rest: Vec<FaceGradient>,
-    /// Chart faces: `area_f / total area`; scaffold faces: [`scaffold::WEIGHT`] times the
-    /// chart's energy, shared equally.
+    /// Chart faces: `area_f / total area`; scaffold faces: the step's scaffold weight
+    /// ([`scaffold::next_weight`]) times the chart's energy, shared equally.
     weight: Vec<f64>,
     /// Faces of the chart (the first ones); the rest are scaffold.
     n_chart: usize,
@@ -322,7 +322,7 @@ impl Problem {
     }
 
     /// This chart problem (no scaffold yet) with the scaffold `s` joined at total weight
-    /// `weight` ([`scaffold::WEIGHT`]) of the chart's true energy `e`.
+    /// `weight` ([`scaffold::next_weight`]) of the chart's true energy `e`.
     fn with_scaffold(&self, s: &scaffold::Scaffold, e: f64, weight: f64) -> Problem {
         let mut p = self.clone();
         p.faces.extend_from_slice(&s.faces);

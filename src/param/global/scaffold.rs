@@ -17,7 +17,10 @@
 //!
 //! At its rest shape a scaffold triangle has zero gradient; its only effects are the barrier
 //! (its energy grows without bound as it collapses) and its stiffness in the step's Hessian,
-//! set by [`WEIGHT`].
+//! set by a weight the solver adapts per step ([`next_weight`]).
+//!
+//! ADMM uses the same scaffold as more faces of its per-face iteration
+//! ([`crate::param::admm::AdmmProblem::with_scaffold`]), built once around its start map.
 
 use spade::{ConstrainedDelaunayTriangulation, HasPosition, Point2, Triangulation};
 
@@ -37,10 +40,10 @@ use super::assembly::FaceGradient;
 /// solver adapts `W` as an interior-point method adapts its barrier parameter
 /// ([`next_weight`]): stiffer while contact bounds the steps (the Newton model then sees the
 /// contact and slides along it instead of being cut short at it), softer while it does not.
-/// Measured on the whole corpus against SCAF's fixed weight (BENCHMARKS.md, "Bijective maps"):
-/// fixed `1/100` spends most iterations on that proximal drag (bunny: 135 scaffold iterations
-/// where the unconstrained solve needs 26), a fixed `1e-6` most on steps cut short at contact
-/// (cgal_cheese: 647 instead of 304).
+/// Measured on the whole atlas corpus (BENCHMARKS.md, "Bijective maps"): a fixed `1/100`
+/// spends most iterations on that proximal drag (bunny: 135 scaffold iterations, 27 adapted),
+/// a fixed `1e-6` most on steps cut short at contact (cgal_cheese: 647, against 304 at `1/100`
+/// and 129 adapted).
 pub const WEIGHT: f64 = 0.01;
 
 /// Smallest scaffold weight: the scaffold's share of the objective (`4 W E` at rest) stays
