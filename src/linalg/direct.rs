@@ -16,16 +16,28 @@
 //! fails the numeric factorisation with [`DirectError::NotPositiveDefinite`]; the callers
 //! treat it as CG treats negative curvature (fall back or report).
 //!
+//! The global solver's systems are made of 2×2 blocks (one per pair of vertices sharing a
+//! face): [`CholeskySymbolic::blocked`] orders the vertex graph instead of the unknowns' (a
+//! quarter of the entries) and factors supernodally, which faer's scalar heuristic does not
+//! choose for 2D-mesh systems; BENCHMARKS.md (issue 21, round 3) has the measured effect.
+//!
 //! faer is built without its `rayon` feature: the factorisation runs on one thread, so its
 //! result, like the rest of the CPU path, does not depend on the thread count.
 #![forbid(unsafe_code)]
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::sparse::linalg::LltError;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::LltError;
+use faer::perm::PermRef;
+use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
+    SymmetricOrdering,
+};
+use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{MatMut, Side};
+use faer::{Conj, MatMut, Par, Side};
 use std::borrow::Cow;
+use std::sync::Arc;
 
 use sprs::CsMat;
 
@@ -75,7 +87,7 @@ pub struct CholeskySymbolic {
     n: usize,
     indptr: Vec<usize>,
     indices: Vec<usize>,
-    symbolic: SymbolicLlt<usize>,
+    symbolic: Arc<SymbolicCholesky<usize>>,
 }
 
 /// The square CSR structure of `a`, checked (the row pointer rebased to start at 0).
@@ -95,25 +107,119 @@ fn csr_parts(a: &CsMat<f64>) -> Result<CsrParts<'_>, DirectError> {
     Ok((a.proper_indptr(), a.indices(), a.data()))
 }
 
+fn faer_error(what: &str, e: impl std::fmt::Debug) -> DirectError {
+    DirectError::Faer {
+        what: format!("{what}: {e:?}"),
+    }
+}
+
+/// The AMD ordering of the quotient graph of `b`×`b` blocks of the symmetric pattern
+/// (`indptr`, `indices`), expanded to the unknowns: forward and inverse permutations.
+fn block_amd(
+    indptr: &[usize],
+    indices: &[usize],
+    n: usize,
+    b: usize,
+) -> Result<(Vec<usize>, Vec<usize>), DirectError> {
+    let nb = n / b;
+    let mut ptr = Vec::with_capacity(nb + 1);
+    let mut idx = Vec::with_capacity(indices.len() / (b * b) + nb);
+    ptr.push(0);
+    for block in 0..nb {
+        let start = idx.len();
+        idx.extend(
+            indices[indptr[block * b]..indptr[(block + 1) * b]]
+                .iter()
+                .map(|&j| j / b),
+        );
+        idx[start..].sort_unstable();
+        let mut kept = start;
+        for k in start..idx.len() {
+            if k == start || idx[k] != idx[kept - 1] {
+                idx[kept] = idx[k];
+                kept += 1;
+            }
+        }
+        idx.truncate(kept);
+        ptr.push(idx.len());
+    }
+    let pattern = SymbolicSparseColMatRef::new_checked(nb, nb, &ptr, None, &idx);
+    let (mut fwd, mut inv) = (vec![0usize; nb], vec![0usize; nb]);
+    let mut mem = MemBuffer::try_new(amd::order_maybe_unsorted_scratch::<usize>(nb, idx.len()))
+        .map_err(|e| faer_error("ordering workspace", e))?;
+    amd::order_maybe_unsorted(
+        &mut fwd,
+        &mut inv,
+        pattern,
+        amd::Control::default(),
+        MemStack::new(&mut mem),
+    )
+    .map_err(|e| faer_error("ordering", e))?;
+    let expand = |p: &[usize]| -> Vec<usize> {
+        p.iter()
+            .flat_map(|&v| (0..b).map(move |r| b * v + r))
+            .collect()
+    };
+    Ok((expand(&fwd), expand(&inv)))
+}
+
 impl CholeskySymbolic {
     /// Orders and symbolically factors the pattern of the symmetric matrix `a` (CSR, both
     /// triangles stored; only the upper triangle of each row is read, so a matrix symmetric in
     /// pattern but not quite in value is factored as its upper triangle says).
     pub fn new(a: &CsMat<f64>) -> Result<CholeskySymbolic, DirectError> {
+        Self::analyse(a, None, false)
+    }
+
+    /// [`CholeskySymbolic::new`] for a matrix made of dense `b`×`b` blocks (the interleaved
+    /// UVs of a mesh: one block per pair of vertices that share a face). The ordering is the
+    /// AMD ordering of the blocks' graph, which has `b²` times fewer entries to order and keeps
+    /// each block's unknowns together; and the factorisation is supernodal: the `b` columns of
+    /// a block have the same structure in the factor, so its columns come at least `b` at a
+    /// time and dense kernels apply to every panel (faer's own choice, from the flop count
+    /// per entry of a scalar matrix, picks the column-by-column factorisation for 2D-mesh
+    /// systems; BENCHMARKS.md has the measured difference).
+    pub fn blocked(a: &CsMat<f64>, b: usize) -> Result<CholeskySymbolic, DirectError> {
+        let (indptr, indices, _) = csr_parts(a)?;
+        let n = a.rows();
+        let perm = if b > 1 && n % b == 0 && n > 0 {
+            Some(block_amd(&indptr, indices, n, b)?)
+        } else {
+            None
+        };
+        Self::analyse(a, perm, b > 1)
+    }
+
+    /// Symbolic factorisation of `a` under `perm` (forward, inverse; AMD when `None`).
+    fn analyse(
+        a: &CsMat<f64>,
+        perm: Option<(Vec<usize>, Vec<usize>)>,
+        supernodal: bool,
+    ) -> Result<CholeskySymbolic, DirectError> {
         let (indptr, indices, _) = csr_parts(a)?;
         let n = a.rows();
         // The CSR arrays of A are the CSC arrays of Aᵀ = A; the rows' upper triangle is the
         // columns' lower one.
         let pattern = SymbolicSparseColMatRef::new_checked(n, n, &indptr, None, indices);
-        let symbolic =
-            SymbolicLlt::try_new(pattern, Side::Lower).map_err(|e| DirectError::Faer {
-                what: format!("symbolic factorisation: {e:?}"),
-            })?;
+        let ordering = match &perm {
+            Some((fwd, inv)) => SymmetricOrdering::Custom(PermRef::new_checked(fwd, inv, n)),
+            None => SymmetricOrdering::Amd,
+        };
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: if supernodal {
+                SupernodalThreshold::FORCE_SUPERNODAL
+            } else {
+                SupernodalThreshold::default()
+            },
+            ..Default::default()
+        };
+        let symbolic = factorize_symbolic_cholesky(pattern, Side::Lower, ordering, params)
+            .map_err(|e| faer_error("symbolic factorisation", e))?;
         Ok(CholeskySymbolic {
             n,
             indptr: indptr.to_vec(),
             indices: indices.to_vec(),
-            symbolic,
+            symbolic: Arc::new(symbolic),
         })
     }
 
@@ -133,17 +239,32 @@ impl CholeskySymbolic {
         }
         let pattern = SymbolicSparseColMatRef::new_checked(self.n, self.n, &indptr, None, indices);
         let mat = SparseColMatRef::new(pattern, data);
-        let llt = Llt::try_new_with_symbolic(self.symbolic.clone(), mat, Side::Lower).map_err(
-            |e| match e {
-                LltError::Numeric(
-                    faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index },
-                ) => DirectError::NotPositiveDefinite { pivot: index },
-                LltError::Generic(g) => DirectError::Faer {
-                    what: format!("numeric factorisation: {g:?}"),
-                },
-            },
-        )?;
-        Ok(Cholesky { n: self.n, llt })
+        let mut values = vec![0.0; self.symbolic.len_val()];
+        let scratch = self
+            .symbolic
+            .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
+        let mut mem =
+            MemBuffer::try_new(scratch).map_err(|e| faer_error("factorisation workspace", e))?;
+        self.symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut values,
+                mat,
+                Side::Lower,
+                Default::default(),
+                Par::Seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|e| match e {
+                LltError::NonPositivePivot { index } => {
+                    DirectError::NotPositiveDefinite { pivot: index }
+                }
+            })?;
+        Ok(Cholesky {
+            n: self.n,
+            symbolic: self.symbolic.clone(),
+            values,
+        })
     }
 }
 
@@ -151,7 +272,8 @@ impl CholeskySymbolic {
 #[derive(Clone, Debug)]
 pub struct Cholesky {
     n: usize,
-    llt: Llt<usize, f64>,
+    symbolic: Arc<SymbolicCholesky<usize>>,
+    values: Vec<f64>,
 }
 
 impl Cholesky {
@@ -205,8 +327,14 @@ impl Cholesky {
         if self.n == 0 || k == 0 {
             return Ok(());
         }
-        self.llt
-            .solve_in_place(MatMut::from_column_major_slice_mut(x, self.n, k));
+        let scratch = self.symbolic.solve_in_place_scratch::<f64>(k, Par::Seq);
+        let mut mem = MemBuffer::try_new(scratch).map_err(|e| faer_error("solve workspace", e))?;
+        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(x, self.n, k),
+            Par::Seq,
+            MemStack::new(&mut mem),
+        );
         if x.iter().any(|v| !v.is_finite()) {
             return Err(DirectError::NotPositiveDefinite { pivot: 0 });
         }
@@ -310,6 +438,60 @@ mod tests {
         chol2.solve(&b[..n], &mut x2).unwrap();
         for i in 0..n {
             assert!((x2[i] - 0.5 * x[i]).abs() < 1e-12);
+        }
+    }
+
+    /// A matrix of 2×2 blocks (a vertex-graph Laplacian ⊗ an SPD 2×2, shifted): the block
+    /// ordering keeps each block's two unknowns adjacent, and its supernodal factor solves
+    /// like the scalar AMD one.
+    #[test]
+    fn blocked_ordering_solves_like_the_scalar_one() {
+        // A 6×5 grid of vertices, 4-neighbour graph.
+        let (w, h) = (6, 5);
+        let nv = w * h;
+        let k = [[2.0, 0.5], [0.5, 1.0]];
+        let mut e = Vec::new();
+        let mut block = |a: usize, b: usize, s: f64| {
+            for r in 0..2 {
+                for c in 0..2 {
+                    e.push((2 * a + r, 2 * b + c, s * k[r][c]));
+                }
+            }
+        };
+        for y in 0..h {
+            for x in 0..w {
+                let v = y * w + x;
+                let mut deg = 0.1;
+                for (dx, dy) in [(1, 0), (0, 1)] {
+                    if x + dx < w && y + dy < h {
+                        let u = (y + dy) * w + x + dx;
+                        block(v, u, -1.0);
+                        block(u, v, -1.0);
+                    }
+                }
+                for (dx, dy) in [(-1i32, 0i32), (1, 0), (0, -1), (0, 1)] {
+                    let (xx, yy) = (x as i32 + dx, y as i32 + dy);
+                    if xx >= 0 && yy >= 0 && (xx as usize) < w && (yy as usize) < h {
+                        deg += 1.0;
+                    }
+                }
+                block(v, v, deg);
+            }
+        }
+        let a = csr(2 * nv, &e);
+        let b: Vec<f64> = (0..2 * nv).map(|i| ((i * 7) % 11) as f64 - 5.0).collect();
+        let blocked = CholeskySymbolic::blocked(&a, 2).unwrap();
+        let perm = blocked.symbolic.perm().unwrap();
+        let (fwd, _) = perm.arrays();
+        for pair in fwd.chunks_exact(2) {
+            assert!(pair[0] % 2 == 0 && pair[1] == pair[0] + 1, "{pair:?}");
+        }
+        let (mut x1, mut x2) = (vec![0.0; 2 * nv], vec![0.0; 2 * nv]);
+        blocked.factor(&a).unwrap().solve(&b, &mut x1).unwrap();
+        Cholesky::new(&a).unwrap().solve(&b, &mut x2).unwrap();
+        assert!(residual(&a, &x1, &b) < 1e-10);
+        for (p, q) in x1.iter().zip(&x2) {
+            assert!((p - q).abs() < 1e-10 * (1.0 + q.abs()));
         }
     }
 

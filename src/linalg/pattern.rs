@@ -16,26 +16,74 @@ pub fn neighbours<const K: usize>(
     simplices: &[[u32; K]],
     with_self: bool,
 ) -> Vec<Vec<u32>> {
-    let mut nb: Vec<Vec<u32>> = if with_self {
-        (0..nv as u32).map(|v| vec![v]).collect()
-    } else {
-        vec![Vec::new(); nv]
+    let (ptr, idx) = neighbour_lists(nv, &[simplices], with_self);
+    ptr.windows(2).map(|w| idx[w[0]..w[1]].to_vec()).collect()
+}
+
+/// [`neighbours`] of the simplices of all `groups` (corners from `nv` on ignored) as one flat list (vertex a's neighbours
+/// are `idx[ptr[a]..ptr[a + 1]]`): one allocation instead of one per vertex, which is most of
+/// the cost of a pattern built once per iteration (the scaffold's).
+fn neighbour_lists<const K: usize>(
+    nv: usize,
+    groups: &[&[[u32; K]]],
+    with_self: bool,
+) -> (Vec<usize>, Vec<u32>) {
+    // Corners from `nv` on are fixed (not unknowns): they have no rows and no blocks.
+    let pairs = || {
+        groups.iter().flat_map(|g| g.iter()).flat_map(move |s| {
+            s.iter()
+                .filter(move |&&a| (a as usize) < nv)
+                .flat_map(move |&a| {
+                    s.iter()
+                        .filter(move |&&b| b != a && (b as usize) < nv)
+                        .map(move |&b| (a, b))
+                })
+        })
     };
-    for s in simplices {
-        for &a in s {
-            for &b in s {
-                if a != b {
-                    nb[a as usize].push(b);
-                }
-            }
+    let mut count = vec![usize::from(with_self); nv];
+    for (a, _) in pairs() {
+        count[a as usize] += 1;
+    }
+    let mut ptr = Vec::with_capacity(nv + 1);
+    ptr.push(0);
+    for c in &count {
+        ptr.push(ptr[ptr.len() - 1] + c);
+    }
+    let mut idx = vec![0u32; ptr[nv]];
+    let mut next = ptr[..nv].to_vec();
+    if with_self {
+        for (a, n) in next.iter_mut().enumerate() {
+            idx[*n] = a as u32;
+            *n += 1;
         }
     }
-    for l in &mut nb {
-        l.sort_unstable();
-        l.dedup();
+    for (a, b) in pairs() {
+        idx[next[a as usize]] = b;
+        next[a as usize] += 1;
     }
-    nb
+    // Sort and deduplicate each list, compacting in place (the write position never passes
+    // the read position).
+    let mut w = 0;
+    let mut out = Vec::with_capacity(nv + 1);
+    out.push(0);
+    for a in 0..nv {
+        idx[ptr[a]..ptr[a + 1]].sort_unstable();
+        let start = w;
+        for k in ptr[a]..ptr[a + 1] {
+            let v = idx[k];
+            if w == start || idx[w - 1] != v {
+                idx[w] = v;
+                w += 1;
+            }
+        }
+        out.push(w);
+    }
+    idx.truncate(w);
+    (out, idx)
 }
+
+/// The slot of a corner pair with a fixed corner ([`BlockPattern::fixed`]): no block.
+pub const FIXED: u32 = u32::MAX;
 
 /// CSR structure of the (D·#V)² Hessian: row `D·a + r` holds columns `D·b + s` for every
 /// vertex b sharing a simplex with a (a itself included), b ascending.
@@ -45,23 +93,32 @@ pub struct BlockPattern<const D: usize, const K: usize> {
     pub n: usize,
     pub indptr: Vec<usize>,
     pub indices: Vec<usize>,
-    /// Per simplex, per corner pair (i, j): position of `s[j]` in `s[i]`'s neighbour list.
+    /// Per simplex, per corner pair (i, j): position of `s[j]` in `s[i]`'s neighbour list
+    /// ([`FIXED`] when either corner is fixed).
     pub slot: Vec<[[u32; K]; K]>,
     /// Per vertex: its position in its own neighbour list (the diagonal block).
     pub diag_slot: Vec<u32>,
 }
 
 impl<const D: usize, const K: usize> BlockPattern<D, K> {
-    /// The pattern of `simplices` over `nv` vertices (indices must be < `nv`).
+    /// The pattern of `simplices` over `nv` vertices (corners from `nv` on are fixed: no
+    /// rows, no blocks, [`FIXED`] slots).
     pub fn new(nv: usize, simplices: &[[u32; K]]) -> Self {
-        let nb = neighbours(nv, simplices, true);
+        Self::with_extra(nv, simplices, &[])
+    }
+
+    /// The pattern of `simplices` and `extra` over `nv` vertices, with the slots of
+    /// `simplices` only: `extra` reserves blocks for simplices that may replace some of them
+    /// later ([`BlockPattern::rebind`]) without a new pattern.
+    pub fn with_extra(nv: usize, simplices: &[[u32; K]], extra: &[[u32; K]]) -> Self {
+        let (ptr, nb) = neighbour_lists(nv, &[simplices, extra], true);
         let n = D * nv;
         let mut indptr = Vec::with_capacity(n + 1);
-        let mut indices = Vec::new();
+        let mut indices = Vec::with_capacity(D * D * nb.len());
         indptr.push(0);
-        for l in &nb {
+        for w in ptr.windows(2) {
             for _ in 0..D {
-                for &b in l {
+                for &b in &nb[w[0]..w[1]] {
                     for s in 0..D {
                         indices.push(D * b as usize + s);
                     }
@@ -69,29 +126,72 @@ impl<const D: usize, const K: usize> BlockPattern<D, K> {
                 indptr.push(indices.len());
             }
         }
-        // binary_search cannot fail: every corner was inserted into every other's list, and
-        // every vertex into its own.
-        let find = |a: u32, b: u32| nb[a as usize].binary_search(&b).unwrap_or(0) as u32;
-        let slot = simplices
+        let mut pattern = BlockPattern {
+            n,
+            indptr,
+            indices,
+            slot: Vec::new(),
+            diag_slot: Vec::new(),
+        };
+        // Neither can fail: every corner was inserted into every other's list, and every
+        // vertex into its own.
+        pattern.rebind(0, simplices);
+        pattern.diag_slot = (0..nv as u32)
+            .map(|v| pattern.find(v, v).unwrap_or(0))
+            .collect();
+        pattern
+    }
+    /// Replaces the simplices from `first` on by `simplices` (their slots), if the pattern has
+    /// a block for every pair of their corners; `false` (and nothing changed) otherwise.
+    pub fn rebind(&mut self, first: usize, simplices: &[[u32; K]]) -> bool {
+        let slots: Option<Vec<[[u32; K]; K]>> = simplices
             .iter()
             .map(|t| {
                 let mut s = [[0u32; K]; K];
                 for i in 0..K {
                     for j in 0..K {
-                        s[i][j] = find(t[i], t[j]);
+                        s[i][j] = if self.fixed(t[i]) || self.fixed(t[j]) {
+                            FIXED
+                        } else {
+                            self.find(t[i], t[j])?
+                        };
                     }
                 }
-                s
+                Some(s)
             })
             .collect();
-        let diag_slot = (0..nv as u32).map(|v| find(v, v)).collect();
-        BlockPattern {
-            n,
-            indptr,
-            indices,
-            slot,
-            diag_slot,
+        match slots {
+            Some(slots) if first <= self.slot.len() => {
+                self.slot.truncate(first);
+                self.slot.extend(slots);
+                true
+            }
+            _ => false,
         }
+    }
+
+    /// Whether vertex `v` is fixed (no rows: index from `n / D` on).
+    #[inline]
+    pub fn fixed(&self, v: u32) -> bool {
+        D * v as usize >= self.n
+    }
+
+    /// Position of vertex `b` in the neighbour list of vertex `a`, if it is there.
+    fn find(&self, a: u32, b: u32) -> Option<u32> {
+        let row = D * a as usize;
+        let cols = self.indices.get(self.indptr[row]..self.indptr[row + 1])?;
+        // Neighbour k's block starts at column entry D·k, with column D·b.
+        let target = D * b as usize;
+        let (mut lo, mut hi) = (0, cols.len() / D);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            match cols[D * mid].cmp(&target) {
+                std::cmp::Ordering::Less => lo = mid + 1,
+                std::cmp::Ordering::Greater => hi = mid,
+                std::cmp::Ordering::Equal => return Some(mid as u32),
+            }
+        }
+        None
     }
 
     /// Index in the value array of entry (D·a + r, D·b + s), b the `k`-th neighbour of a.
@@ -114,5 +214,47 @@ impl<const D: usize, const K: usize> BlockPattern<D, K> {
             self.indices.clone(),
             data,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The quad 0-1-2-3 split along 0–2, with the other diagonal's triangle reserved: its
+    /// re-triangulation along 1–3 rebinds into the same structure, a triangle to a vertex
+    /// outside it does not, and a corner from `nv` on is fixed (no row, no block).
+    #[test]
+    fn reserved_blocks_rebind_and_fixed_corners_have_none() {
+        let faces = [[0u32, 1, 2], [0, 2, 3]];
+        let mut p = BlockPattern::<2, 3>::with_extra(4, &faces, &[[1, 3, 0]]);
+        assert_eq!(p.n, 8);
+        // Every vertex of the quad is now a neighbour of every other: 4 blocks per row.
+        for row in 0..8 {
+            assert_eq!(p.indptr[row + 1] - p.indptr[row], 8);
+        }
+        let flipped = [[0u32, 1, 3], [1, 2, 3]];
+        assert!(p.rebind(0, &flipped));
+        for (t, s) in flipped.iter().zip(&p.slot) {
+            for i in 0..3 {
+                for j in 0..3 {
+                    let pos = p.pos(t[i], 0, s[i][j], 0);
+                    assert_eq!(p.indices[pos], 2 * t[j] as usize);
+                }
+            }
+        }
+        // Without the reserve, 1 and 3 share no face.
+        let mut plain = BlockPattern::<2, 3>::new(4, &faces);
+        assert!(!plain.rebind(0, &flipped));
+        assert_eq!(plain.slot.len(), 2);
+        // Vertex 4 is fixed: only the blocks among 0..4 exist.
+        let q = BlockPattern::<2, 3>::new(4, &[[0u32, 1, 4], [1, 2, 4]]);
+        assert_eq!(q.n, 8);
+        assert!(q.fixed(4) && !q.fixed(3));
+        assert_eq!(q.slot[0][0][2], FIXED);
+        assert_eq!(q.slot[0][2][1], FIXED);
+        assert_ne!(q.slot[0][0][1], FIXED);
+        // Vertex 3 is in no face: its row holds its diagonal block only.
+        assert_eq!(q.indptr[7] - q.indptr[6], 2);
     }
 }

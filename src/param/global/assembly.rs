@@ -10,7 +10,7 @@
 
 use sprs::CsMat;
 
-use crate::linalg::pattern::BlockPattern;
+use crate::linalg::pattern::{BlockPattern, FIXED};
 use crate::linalg::SolveError;
 use crate::mesh::{FaceFrames, TriMesh};
 
@@ -106,9 +106,23 @@ impl Pattern {
         Self::from_faces(mesh.positions.len(), &mesh.faces)
     }
 
-    /// The pattern of `faces` over `nv` vertices (a chart with its scaffold).
+    /// The pattern of `faces` over `nv` vertices.
     pub fn from_faces(nv: usize, faces: &[[u32; 3]]) -> Result<Pattern, SolveError> {
-        let blocks = BlockPattern::new(nv, faces);
+        Self::with_extra(nv, faces, &[])
+    }
+
+    /// The pattern of `faces` and `extra` over `nv` vertices, set up for `faces` (a chart with
+    /// its scaffold, and blocks reserved for the triangles a re-triangulation may bring:
+    /// [`Pattern::rebind`]). Corners from `nv` on (the scaffold's frame) are fixed: they are
+    /// not unknowns, so they have no rows, and a scaffold triangle only couples the chart
+    /// vertices among its corners: re-triangulations that only move the long triangles to the
+    /// frame leave the pattern unchanged.
+    pub fn with_extra(
+        nv: usize,
+        faces: &[[u32; 3]],
+        extra: &[[u32; 3]],
+    ) -> Result<Pattern, SolveError> {
+        let blocks = BlockPattern::with_extra(nv, faces, extra);
         let diag = (0..2 * nv)
             .map(|i| blocks.diag((i / 2) as u32, i % 2))
             .collect();
@@ -118,6 +132,13 @@ impl Pattern {
             blocks,
             diag,
         })
+    }
+
+    /// Sets the pattern up for faces that replace those from `first` on, keeping the
+    /// structure (and so any symbolic factorisation of it), when it has every block they
+    /// need; `false` otherwise.
+    pub fn rebind(&mut self, first: usize, faces: &[[u32; 3]]) -> bool {
+        self.blocks.rebind(first, faces)
     }
 
     /// Overwrites the values with `Σ_f local[f] + rel_shift · D` (`local[f]` over corners
@@ -137,6 +158,9 @@ impl Pattern {
             let slot = &self.blocks.slot[f];
             for k in 0..3 {
                 for l in 0..3 {
+                    if slot[k][l] == FIXED {
+                        continue;
+                    }
                     for r in 0..2 {
                         let base = self.blocks.pos(faces[f][k], r, slot[k][l], 0);
                         for s in 0..2 {
@@ -154,26 +178,6 @@ impl Pattern {
             total += shift;
         }
         total / self.diag.len().max(1) as f64
-    }
-
-    /// Fixes the unknowns from `first` on (the scaffold's frame): their rows and columns
-    /// become those of the identity, so with a zero right-hand side there the solve leaves them
-    /// in place and is the reduced system's on the others.
-    pub fn pin(&mut self, first: usize) {
-        let n = self.matrix.rows();
-        if first >= n {
-            return;
-        }
-        let blocks = &self.blocks;
-        let data = self.matrix.data_mut();
-        for row in 0..n {
-            for k in blocks.indptr[row]..blocks.indptr[row + 1] {
-                let col = blocks.indices[k];
-                if row >= first || col >= first {
-                    data[k] = if row == col { 1.0 } else { 0.0 };
-                }
-            }
-        }
     }
 }
 

@@ -515,9 +515,26 @@ pub fn solve(
         // The scaffold's system: its pattern and symbolic factorisation are kept while the
         // rebuilt scaffold has the same triangles (the usual case once the boundary moves
         // little), since the ordering and symbolic analysis cost as much as a factorisation.
+        // The scaffold's system: its pattern and symbolic factorisation are kept while the
+        // scaffold keeps its triangles, and across a re-triangulation whose triangles the
+        // pattern already has blocks for: the pattern also holds, for every edge between two
+        // scaffold triangles, the other diagonal of their quad (the edge a flip would make).
+        // A new pattern costs an ordering and a symbolic analysis, about three numeric
+        // factorisations of a 2D-mesh system; the frame's vertices are not unknowns (the
+        // frame is fixed), so triangles that only change how the boundary meets the frame
+        // change no block either.
         if let Some(s) = &scaffold {
-            if scaffold_system.as_ref().is_none_or(|c| c.0 != s.faces) {
-                let p = Pattern::from_faces(x.len() / 2, &problem.faces)?;
+            let n = chart.n_chart;
+            let kept = scaffold_system.as_mut().is_some_and(|c| {
+                c.0 == s.faces
+                    || (c.1.rebind(n, &problem.faces[n..]) && {
+                        c.0.clone_from(&s.faces);
+                        // Same structure: the symbolic factorisation stays valid.
+                        true
+                    })
+            });
+            if !kept {
+                let p = Pattern::with_extra(nv, &problem.faces, &s.flip_diagonals())?;
                 scaffold_system = Some((s.faces.clone(), p, None));
             }
         }
@@ -806,17 +823,20 @@ fn direction(
         })
         .collect();
     pattern.fill(&problem.faces, &local, REL_SHIFT);
-    pattern.pin(problem.free);
-    let rhs: Vec<f64> = g.iter().map(|v| -v).collect();
+    // The unknowns are the chart's; the scaffold's frame (after them) does not move.
+    let free = problem.free;
+    d[free..].fill(0.0);
+    let d = &mut d[..free];
+    let rhs: Vec<f64> = g[..free].iter().map(|v| -v).collect();
     if opts.linear_solver == LinearSolver::Cholesky {
         if symbolic.is_none() {
-            *symbolic = Some(CholeskySymbolic::new(&pattern.matrix)?);
+            *symbolic = Some(CholeskySymbolic::blocked(&pattern.matrix, 2)?);
         }
         let factor = symbolic.as_ref().map(|s| s.factor(&pattern.matrix));
         match factor {
             Some(Ok(chol)) => {
                 chol.solve(&rhs, d)?;
-                return Ok((dot(g, d), 0));
+                return Ok((dot(&g[..free], d), 0));
             }
             // An exact Hessian away from a minimum: `SolveError::Failed`, which the caller
             // treats like CG's negative curvature.
@@ -856,5 +876,5 @@ fn direction(
             what: "global solver search direction".into(),
         });
     }
-    Ok((dot(g, d), iterations))
+    Ok((dot(&g[..free], d), iterations))
 }

@@ -246,6 +246,28 @@ impl Scaffold {
 }
 
 impl Scaffold {
+    /// One triangle `[c, e, a]` per edge `(a, b)` shared by two scaffold triangles `(a, b, c)`
+    /// and `(b, a, e)`: it holds the edge `c–e` that flipping `(a, b)` would create. A
+    /// re-triangulation after the boundary moved a little differs from this one by such flips,
+    /// so a pattern that has these edges too serves it unchanged
+    /// ([`super::assembly::Pattern::rebind`]).
+    pub fn flip_diagonals(&self) -> Vec<[u32; 3]> {
+        // Directed edge (a, b) → opposite corner, for every triangle.
+        let mut half: Vec<([u32; 2], u32)> = self
+            .faces
+            .iter()
+            .flat_map(|f| (0..3).map(move |k| ([f[k], f[(k + 1) % 3]], f[(k + 2) % 3])))
+            .collect();
+        half.sort_unstable();
+        half.iter()
+            .filter(|(e, _)| e[0] < e[1])
+            .filter_map(|&([a, b], c)| {
+                let k = half.binary_search_by(|h| h.0.cmp(&[b, a])).ok()?;
+                Some([c, half[k].1, a])
+            })
+            .collect()
+    }
+
     /// Makes the current shape of every triangle its rest shape (chart map `x` of `nv`
     /// vertices), keeping the triangles, so the scaffold starts the next step at zero gradient
     /// again. `false` (nothing changed) if a triangle has no area left: build a new scaffold.
@@ -334,6 +356,40 @@ mod tests {
         }
         // Frame square of side 2·3·0.5 = 3, minus the unit chart.
         assert!((area - 8.0).abs() < 1e-9, "{area}");
+    }
+
+    /// Every edge shared by two scaffold triangles gives the triangle holding the other
+    /// diagonal of their quad, and nothing else does.
+    #[test]
+    fn flip_diagonals_hold_the_other_diagonal_of_each_quad() {
+        let (f, x) = square();
+        let s = Scaffold::build(&x, 4, &boundary_edges(&f)).expect("simple boundary");
+        let mut shared: Vec<[u32; 2]> = s
+            .faces
+            .iter()
+            .flat_map(|t| (0..3).map(move |k| [t[k], t[(k + 1) % 3]]))
+            .filter(|e| {
+                e[0] < e[1]
+                    && s.faces
+                        .iter()
+                        .any(|t| (0..3).any(|k| [t[k], t[(k + 1) % 3]] == [e[1], e[0]]))
+            })
+            .collect();
+        shared.sort_unstable();
+        let diagonals = s.flip_diagonals();
+        assert_eq!(diagonals.len(), shared.len());
+        for ([a, b], [c, e, a2]) in shared.iter().zip(&diagonals) {
+            assert_eq!(*a, *a2);
+            // c and e are the corners opposite (a, b) in its two triangles.
+            for v in [c, e] {
+                assert!(v != a && v != b);
+                assert!(s
+                    .faces
+                    .iter()
+                    .any(|t| t.contains(a) && t.contains(b) && t.contains(v)));
+            }
+            assert_ne!(c, e);
+        }
     }
 
     /// A map whose boundary crosses itself has no scaffold.
