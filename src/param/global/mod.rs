@@ -480,12 +480,12 @@ pub fn solve(
         }
         let t_it = Instant::now();
         // The problem of this iteration: the chart, with the scaffold when it is on (its frame
-        // vertices appended to the unknowns, pinned). The scaffold is re-triangulated when the
-        // last step was limited by it (a scaffold triangle about to flip where the chart's
-        // boundary is not near contact is a poor triangulation, and the Delaunay one of the
-        // current boundary is the best there is); otherwise its triangles stay and only their
-        // rest shapes are reset to the current ones, so the pattern and the symbolic
-        // factorisation stay too.
+        // vertices appended to the chart's UVs; fixed, so not unknowns of the linear systems).
+        // The scaffold is re-triangulated when the last step was limited by it (a scaffold
+        // triangle about to flip where the chart's boundary is not near contact is a poor
+        // triangulation, and the Delaunay one of the current boundary is the best there is);
+        // otherwise its triangles stay and only their rest shapes are reset to the current
+        // ones, so the pattern and the symbolic factorisation stay too.
         if let (Some(b), true) = (&boundary, scaffolded) {
             let kept = !remesh && scaffold.as_mut().is_some_and(|s| s.reset_rest(&xc, nv));
             if !kept {
