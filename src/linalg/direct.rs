@@ -41,6 +41,7 @@ use std::sync::Arc;
 
 use sprs::CsMat;
 
+use super::pattern::sort_dedup_lists;
 use super::SolveError;
 
 /// Why a direct solve failed.
@@ -122,27 +123,10 @@ fn block_amd(
     b: usize,
 ) -> Result<(Vec<usize>, Vec<usize>), DirectError> {
     let nb = n / b;
-    let mut ptr = Vec::with_capacity(nb + 1);
-    let mut idx = Vec::with_capacity(indices.len() / (b * b) + nb);
-    ptr.push(0);
-    for block in 0..nb {
-        let start = idx.len();
-        idx.extend(
-            indices[indptr[block * b]..indptr[(block + 1) * b]]
-                .iter()
-                .map(|&j| j / b),
-        );
-        idx[start..].sort_unstable();
-        let mut kept = start;
-        for k in start..idx.len() {
-            if k == start || idx[k] != idx[kept - 1] {
-                idx[kept] = idx[k];
-                kept += 1;
-            }
-        }
-        idx.truncate(kept);
-        ptr.push(idx.len());
-    }
+    // Block row i: the block columns of its b rows (rows b·i .. b·i + b are contiguous).
+    let mut idx: Vec<usize> = indices[..indptr[n]].iter().map(|&j| j / b).collect();
+    let starts: Vec<usize> = (0..=nb).map(|i| indptr[i * b]).collect();
+    let ptr = sort_dedup_lists(&starts, &mut idx);
     let pattern = SymbolicSparseColMatRef::new_checked(nb, nb, &ptr, None, &idx);
     let (mut fwd, mut inv) = (vec![0usize; nb], vec![0usize; nb]);
     let mut mem = MemBuffer::try_new(amd::order_maybe_unsorted_scratch::<usize>(nb, idx.len()))

@@ -20,9 +20,9 @@ pub fn neighbours<const K: usize>(
     ptr.windows(2).map(|w| idx[w[0]..w[1]].to_vec()).collect()
 }
 
-/// [`neighbours`] of the simplices of all `groups` (corners from `nv` on ignored) as one flat list (vertex a's neighbours
-/// are `idx[ptr[a]..ptr[a + 1]]`): one allocation instead of one per vertex, which is most of
-/// the cost of a pattern built once per iteration (the scaffold's).
+/// [`neighbours`] of the simplices of all `groups` (corners from `nv` on ignored) as one flat
+/// list: vertex a's neighbours are `idx[ptr[a]..ptr[a + 1]]` (one allocation, not one per
+/// vertex: the scaffold's pattern is built again after re-triangulations).
 fn neighbour_lists<const K: usize>(
     nv: usize,
     groups: &[&[[u32; K]]],
@@ -61,15 +61,21 @@ fn neighbour_lists<const K: usize>(
         idx[next[a as usize]] = b;
         next[a as usize] += 1;
     }
-    // Sort and deduplicate each list, compacting in place (the write position never passes
-    // the read position).
+    let ptr = sort_dedup_lists(&ptr, &mut idx);
+    (ptr, idx)
+}
+
+/// Sorts and deduplicates each list `idx[ptr[i]..ptr[i + 1]]` of a flat list of lists,
+/// compacting `idx` in place (the write position never passes the read position); returns
+/// the new list starts.
+pub(crate) fn sort_dedup_lists<T: Ord + Copy>(ptr: &[usize], idx: &mut Vec<T>) -> Vec<usize> {
     let mut w = 0;
-    let mut out = Vec::with_capacity(nv + 1);
+    let mut out = Vec::with_capacity(ptr.len());
     out.push(0);
-    for a in 0..nv {
-        idx[ptr[a]..ptr[a + 1]].sort_unstable();
+    for l in ptr.windows(2) {
+        idx[l[0]..l[1]].sort_unstable();
         let start = w;
-        for k in ptr[a]..ptr[a + 1] {
+        for k in l[0]..l[1] {
             let v = idx[k];
             if w == start || idx[w - 1] != v {
                 idx[w] = v;
@@ -79,7 +85,7 @@ fn neighbour_lists<const K: usize>(
         out.push(w);
     }
     idx.truncate(w);
-    (out, idx)
+    out
 }
 
 /// The slot of a corner pair with a fixed corner ([`BlockPattern::fixed`]): no block.
@@ -141,6 +147,7 @@ impl<const D: usize, const K: usize> BlockPattern<D, K> {
             .collect();
         pattern
     }
+
     /// Replaces the simplices from `first` on by `simplices` (their slots), if the pattern has
     /// a block for every pair of their corners; `false` (and nothing changed) otherwise.
     pub fn rebind(&mut self, first: usize, simplices: &[[u32; K]]) -> bool {

@@ -453,7 +453,7 @@ pub fn solve(
     let mut scaffold_iterations = 0;
     let mut pattern = Pattern::new(mesh)?;
     // The scaffold's triangles, pattern and symbolic factorisation, while it is on.
-    let mut scaffold_system: Option<(Vec<[u32; 3]>, Pattern, Option<CholeskySymbolic>)> = None;
+    let mut scaffold_system: Option<(Pattern, Option<CholeskySymbolic>)> = None;
     // Sparse Cholesky's ordering and symbolic factorisation of the pattern, on first use.
     let mut symbolic: Option<CholeskySymbolic> = None;
     let mut history = Vec::new();
@@ -513,9 +513,6 @@ pub fn solve(
             None => (Cow::Borrowed(&chart), xc.clone()),
         };
         // The scaffold's system: its pattern and symbolic factorisation are kept while the
-        // rebuilt scaffold has the same triangles (the usual case once the boundary moves
-        // little), since the ordering and symbolic analysis cost as much as a factorisation.
-        // The scaffold's system: its pattern and symbolic factorisation are kept while the
         // scaffold keeps its triangles, and across a re-triangulation whose triangles the
         // pattern already has blocks for: the pattern also holds, for every edge between two
         // scaffold triangles, the other diagonal of their quad (the edge a flip would make).
@@ -525,21 +522,17 @@ pub fn solve(
         // change no block either.
         if let Some(s) = &scaffold {
             let n = chart.n_chart;
-            let kept = scaffold_system.as_mut().is_some_and(|c| {
-                c.0 == s.faces
-                    || (c.1.rebind(n, &problem.faces[n..]) && {
-                        c.0.clone_from(&s.faces);
-                        // Same structure: the symbolic factorisation stays valid.
-                        true
-                    })
-            });
+            // Same structure after a rebind: the symbolic factorisation stays valid.
+            let kept = scaffold_system
+                .as_mut()
+                .is_some_and(|c| c.0.rebind(n, &problem.faces[n..]));
             if !kept {
                 let p = Pattern::with_extra(nv, &problem.faces, &s.flip_diagonals())?;
-                scaffold_system = Some((s.faces.clone(), p, None));
+                scaffold_system = Some((p, None));
             }
         }
         let (pattern, symbolic) = match (&scaffold, &mut scaffold_system) {
-            (Some(_), Some((_, p, s))) => (p, s),
+            (Some(_), Some((p, s))) => (p, s),
             _ => (&mut pattern, &mut symbolic),
         };
         d.clear();
