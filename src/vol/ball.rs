@@ -1,20 +1,19 @@
-//! The unit-ball target: the boundary surface onto the unit sphere, the interior harmonic.
+//! The unit-ball target: the boundary surface onto the unit sphere, the interior harmonic,
+//! then untangled with the boundary sliding on the sphere.
 //!
-//! Spherical embedding of a genus-0 surface: remove one vertex's star (leaving a disk),
-//! Tutte-embed the disk in the unit disk (bijective, Tutte 1963), and lift it to the sphere by
-//! inverse stereographic projection with the removed vertex at the pole. Stereographic
-//! projection is a conformal bijection, so the spherical triangles keep their orientation; a
-//! scale s of the disk (a Möbius dilation) is chosen by bisection so the vertices' mean height
-//! is 0, otherwise the Tutte map crowds everything near one pole. Chordal (flat) triangles of
-//! a fine embedding are positive seen from the centre; the few that may not be are counted.
+//! The spherical embedding is built coarse to fine ([`super::progressive`]), so no protrusion
+//! is crowded below the resolution of the coordinates, and relaxed on the sphere
+//! ([`relax_on_sphere`]); a Tutte/stereographic embedding is the fallback should the
+//! progressive one run out of resolution.
 
 use std::path::Path;
 
 use super::energy::IDENTITY;
 use super::harmonic::harmonic_extension;
 use super::newton::{corners_of, newton, NewtonOptions, Objective, Pattern};
+use super::progressive::{chordal_positive, progressive_embedding};
 use super::tet::{cross, dot, is_positive, sub, TetMesh};
-use super::untangle::{untangle_cells, untangle_sliding, UntangleOptions};
+use super::untangle::{untangle_cells, untangle_sliding_protected, UntangleOptions};
 use super::volmap::distortion_objective;
 use super::Targets;
 use super::VolError;
@@ -50,13 +49,83 @@ pub fn sphere_embedding(
             topo.describe()
         )));
     }
+    let t0 = Instant::now();
+    let mut pos = match progressive_embedding(&lp, &lf, relax)? {
+        Some(p) => p,
+        None => tutte_stereographic(&lp, &lf, &topo)?,
+    };
+    let mut nbad = non_positive(&lf, &pos);
+    if trace() {
+        // Smallest chordal area of a face against its share of the sphere (4π · rest area /
+        // total): how far the start crowds a protrusion.
+        let area = |p: &[[f64; 3]], f: &[u32; 3]| {
+            let [a, b, c] = f.map(|v| p[v as usize]);
+            let nrm = cross(sub(b, a), sub(c, a));
+            0.5 * dot(nrm, nrm).sqrt()
+        };
+        let total: f64 = lf.iter().map(|f| area(&lp, f)).sum();
+        let crowd = lf
+            .iter()
+            .map(|f| area(&pos, f) * total / (4.0 * std::f64::consts::PI * area(&lp, f)))
+            .fold(f64::INFINITY, f64::min);
+        eprintln!(
+            "sphere embedding: {nbad} non-positive faces, smallest area / share {crowd:.3e}, {:.2} s",
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    if let Some(nopts) = relax {
+        // Tets whose four corners are all on the boundary are placed by the surface
+        // embedding alone: they belong to the surface problem.
+        let surface_tets: Vec<[u32; 4]> = mesh
+            .tets
+            .iter()
+            .filter(|t| t.iter().all(|&v| local[v as usize] != u32::MAX))
+            .map(|t| t.map(|v| local[v as usize]))
+            .collect();
+        relax_on_sphere(
+            &lp,
+            &lf,
+            &surface_tets,
+            &mut pos,
+            FaceReference::Rest,
+            nopts,
+        )?;
+        nbad = non_positive(&lf, &pos);
+    }
+    Ok((verts.iter().zip(pos).map(|(&v, p)| (v, p)).collect(), nbad))
+}
+
+/// The number of faces whose chordal triangle is not positive seen from the centre.
+fn non_positive(faces: &[[u32; 3]], p: &[[f64; 3]]) -> usize {
+    faces
+        .iter()
+        .filter(|f| {
+            let [a, b, c] = f.map(|v| p[v as usize]);
+            !chordal_positive(a, b, c)
+        })
+        .count()
+}
+
+/// The fallback embedding, for a surface the progressive one cannot resolve: remove one
+/// vertex's star (leaving a disk), Tutte-embed the disk in the unit disk (bijective, Tutte
+/// 1963), and lift it to the sphere by inverse stereographic projection with the removed
+/// vertex at the pole. Stereographic projection is a conformal bijection, so the spherical
+/// triangles keep their orientation; a scale s of the disk (a Möbius dilation) is chosen by
+/// bisection so the vertices' mean height is 0, otherwise the Tutte map crowds everything near
+/// one pole. Long protrusions still crowd below f64 resolution (the reason for the
+/// progressive embedding), so the faces left non-positive are counted by the caller.
+fn tutte_stereographic(
+    lp: &[[f64; 3]],
+    lf: &[[u32; 3]],
+    topo: &Topology,
+) -> Result<Vec<[f64; 3]>, VolError> {
     // Pole: the vertex of highest degree (its removal leaves the roundest hole).
     let pole = (0..lp.len() as u32)
         .max_by_key(|&v| topo.vertex_faces(v).len())
         .unwrap_or(0);
     let disk: Vec<[u32; 3]> = lf.iter().copied().filter(|f| !f.contains(&pole)).collect();
     let dmesh = TriMesh {
-        positions: lp.clone(),
+        positions: lp.to_vec(),
         faces: disk.clone(),
     };
     let dtopo = Topology::build(&dmesh, Path::new("boundary surface minus a star"))
@@ -66,7 +135,7 @@ pub fn sphere_embedding(
             "boundary surface: no disk after removing a star".into(),
         ));
     };
-    let uv = tutte(&lp, &disk, lp_loop, TutteWeights::MeanValue)?;
+    let uv = tutte(lp, &disk, lp_loop, TutteWeights::MeanValue)?;
     let lift = |s: f64, mirror: bool| -> Vec<[f64; 3]> {
         (0..lp.len())
             .map(|i| {
@@ -96,47 +165,23 @@ pub fn sphere_embedding(
         }
     }
     let s = (0.5 * (lo + hi)).exp();
-    let bad = |p: &[[f64; 3]]| {
-        lf.iter()
-            .filter(|f| {
-                // det[a, b, c] = det[b − a, c − a, a]: edge vectors keep the digits of a tiny
-                // triangle that the cancellation in a·(b × c) would lose.
-                let [a, b, c] = f.map(|v| p[v as usize]);
-                !is_positive(dot(a, cross(sub(b, a), sub(c, a))))
-            })
-            .count()
-    };
     let (p0, p1) = (lift(s, false), lift(s, true));
-    let (b0, b1) = (bad(&p0), bad(&p1));
-    let (mut pos, mut nbad) = if b0 <= b1 { (p0, b0) } else { (p1, b1) };
-    if trace() {
-        // Smallest chordal area of a face against its share of the sphere (4π · rest area /
-        // total): how far the conformal start crowds a protrusion.
-        let area = |p: &[[f64; 3]], f: &[u32; 3]| {
-            let [a, b, c] = f.map(|v| p[v as usize]);
-            let nrm = cross(sub(b, a), sub(c, a));
-            0.5 * dot(nrm, nrm).sqrt()
-        };
-        let total: f64 = lf.iter().map(|f| area(&lp, f)).sum();
-        let crowd = lf
-            .iter()
-            .map(|f| area(&pos, f) * total / (4.0 * std::f64::consts::PI * area(&lp, f)))
-            .fold(f64::INFINITY, f64::min);
-        eprintln!("sphere embedding: {nbad} non-positive faces, smallest area / share {crowd:.3e}");
-    }
-    if let Some(nopts) = relax {
-        // Tets whose four corners are all on the boundary are placed by the surface
-        // embedding alone: they belong to the surface problem.
-        let surface_tets: Vec<[u32; 4]> = mesh
-            .tets
-            .iter()
-            .filter(|t| t.iter().all(|&v| local[v as usize] != u32::MAX))
-            .map(|t| t.map(|v| local[v as usize]))
-            .collect();
-        relax_on_sphere(&lp, &lf, &surface_tets, &mut pos, nopts)?;
-        nbad = bad(&pos);
-    }
-    Ok((verts.iter().zip(pos).map(|(&v, p)| (v, p)).collect(), nbad))
+    Ok(if non_positive(lf, &p0) <= non_positive(lf, &p1) {
+        p0
+    } else {
+        p1
+    })
+}
+
+/// The reference shape of every face in [`relax_on_sphere`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaceReference {
+    /// The rest face, scaled so that the rest surface has the sphere's area.
+    Rest,
+    /// An equilateral triangle of an equal share of the sphere's area: for faces whose shape
+    /// means nothing, such as the coarse levels of [`super::progressive`], whose triangles
+    /// join vertices far apart on the surface (a sliver there would be copied, not meant).
+    EqualAreas,
 }
 
 /// Lowers the distortion of a fold-free spherical embedding `pos` of the surface (`rest`,
@@ -161,6 +206,7 @@ pub fn relax_on_sphere(
     faces: &[[u32; 3]],
     surface_tets: &[[u32; 4]],
     pos: &mut [[f64; 3]],
+    reference: FaceReference,
     opts: &NewtonOptions,
 ) -> Result<usize, VolError> {
     let n = pos.len();
@@ -174,10 +220,20 @@ pub fn relax_on_sphere(
         return Ok(0);
     }
     let k = (4.0 * std::f64::consts::PI / total).sqrt();
+    // An equilateral triangle of an equal share of the sphere's area.
+    let side = (16.0 * std::f64::consts::PI / (3f64.sqrt() * faces.len() as f64)).sqrt();
+    let equilateral = [
+        [0.0, 0.0, 0.0],
+        [side, 0.0, 0.0],
+        [0.5 * side, 0.5 * 3f64.sqrt() * side, 0.0],
+    ];
     let mut d_dist = Vec::with_capacity(faces.len());
     let mut weight = Vec::with_capacity(faces.len());
     for f in faces {
-        let [a, b, c] = f.map(|v| rest[v as usize]).map(|p| p.map(|q| k * q));
+        let [a, b, c] = match reference {
+            FaceReference::Rest => f.map(|v| rest[v as usize]).map(|p| p.map(|q| k * q)),
+            FaceReference::EqualAreas => equilateral,
+        };
         let nrm = cross(sub(b, a), sub(c, a));
         let len = dot(nrm, nrm).sqrt();
         let apex = if len > 0.0 {
@@ -341,7 +397,9 @@ pub fn sphere_deviation(mesh: &TetMesh, x: &[[f64; 3]]) -> f64 {
 ///
 /// Why: a fixed spherical embedding can invert tets whose four corners are all boundary
 /// vertices (tets spanning a thin protrusion, placed by the surface embedding alone), and then
-/// no map with that boundary exists. The sphere is the target, not one parametrisation of it, so the boundary slides.
+/// no map with that boundary exists. The sphere is the target, not one parametrisation of it,
+/// so the boundary slides; the tets with three or four boundary corners are protected once
+/// positive (see the comment at the call).
 pub fn slide_on_sphere(
     mesh: &TetMesh,
     start: &[[f64; 3]],
@@ -358,7 +416,17 @@ pub fn slide_on_sphere(
     }
     let fixed = vec![false; x.len()];
     let inverted_start = mesh.inverted(&x).len();
-    let s = untangle_sliding(mesh, &mut x, &fixed, &on_sphere, opts, device)?;
+    // Tets with three or four boundary corners keep the barrier of the untangling energy's
+    // ε → 0 limit once positive: sliding spreads the boundary where the interior needs room,
+    // and without the barrier it also flattens such tets through zero (a tet with four
+    // corners on the sphere, or three and an interior corner in the thin lens under a small
+    // cap, has no interior side to escape to), after which no ε brings them back.
+    let protect: Vec<bool> = mesh
+        .tets
+        .iter()
+        .map(|t| t.iter().filter(|&&v| on_sphere[v as usize]).count() >= 3)
+        .collect();
+    let s = untangle_sliding_protected(mesh, &mut x, &fixed, &on_sphere, &protect, opts, device)?;
     if trace() && s.inverted > 0 {
         let mut by = [0usize; 5];
         for t in mesh.inverted(&x) {

@@ -13,6 +13,7 @@ pub mod job;
 pub mod line_search;
 pub mod medit;
 pub mod newton;
+pub mod progressive;
 pub mod tet;
 pub mod tetgen;
 pub mod untangle;

@@ -63,7 +63,7 @@ pub struct VolmapOptions {
     #[serde(with = "crate::tuning::phase")]
     pub ball_relax: Option<NewtonOptions>,
     /// `--target ball`: Newton on the distortion of the boundary surface's spherical
-    /// embedding before the interior is built (None: the Tutte/stereographic embedding as it
+    /// embedding before the interior is built (None: the coarse-to-fine embedding as it
     /// is). See [`super::ball::relax_on_sphere`]: every step is fold-free, so the cap is a time
     /// budget.
     #[serde(with = "crate::tuning::phase")]

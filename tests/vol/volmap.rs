@@ -563,6 +563,7 @@ fn sphere_relaxation_spreads_a_crowded_embedding() {
         &faces,
         &[],
         &mut pos,
+        foldfree::vol::ball::FaceReference::Rest,
         &foldfree::vol::newton::NewtonOptions::default(),
     )
     .unwrap();
@@ -614,4 +615,49 @@ fn untangle_protected_keeps_protected_tets_positive() {
     assert_eq!(s.inverted, 0);
     assert!(m.inverted(&x).is_empty());
     assert_eq!(x[0], [0.0, 0.0, 0.0]);
+}
+
+/// The coarse-to-fine spherical embedding of a subdivided octahedron stretched 200 times into
+/// a long ellipsoid (a protrusion on either side, which a conformal map crowds exponentially):
+/// every vertex on the unit sphere, every chordal triangle positive, with and without the
+/// levels' relaxation, and with it no face crowded far below its share of the sphere.
+#[test]
+fn progressive_sphere_embedding_is_fold_free_and_uncrowded() {
+    use foldfree::vol::progressive::{chordal_positive, progressive_embedding};
+    use foldfree::vol::tet::{cross, dot, sub};
+    let (p, f) = crate::common::glb::sphere(3);
+    let rest: Vec<[f64; 3]> = p.iter().map(|q| [200.0 * q[0], q[1], q[2]]).collect();
+    let area = |a: [f64; 3], b: [f64; 3], c: [f64; 3]| {
+        let n = cross(sub(b, a), sub(c, a));
+        0.5 * dot(n, n).sqrt()
+    };
+    let total: f64 = f
+        .iter()
+        .map(|t| {
+            area(
+                rest[t[0] as usize],
+                rest[t[1] as usize],
+                rest[t[2] as usize],
+            )
+        })
+        .sum();
+    for relax in [None, Some(foldfree::vol::newton::NewtonOptions::default())] {
+        let pos = progressive_embedding(&rest, &f, relax.as_ref())
+            .unwrap()
+            .expect("embedded");
+        let mut smallest = f64::INFINITY;
+        for q in &pos {
+            assert!((dot(*q, *q).sqrt() - 1.0).abs() < 1e-12);
+        }
+        for t in &f {
+            let [a, b, c] = t.map(|v| pos[v as usize]);
+            assert!(chordal_positive(a, b, c), "face {t:?} not positive");
+            let [ra, rb, rc] = t.map(|v| rest[v as usize]);
+            let share = 4.0 * std::f64::consts::PI * area(ra, rb, rc) / total;
+            smallest = smallest.min(area(a, b, c) / share);
+        }
+        if relax.is_some() {
+            assert!(smallest > 1e-3, "smallest area / share {smallest:e}");
+        }
+    }
 }

@@ -385,11 +385,10 @@ pub fn untangle_cells(
 /// of the unprotected problem (both energies tend to the same limit), so protection only
 /// removes the paths that go through inverting the protected tets.
 ///
-/// Not used by the ball target by default (BENCHMARKS.md, issue 24, session 16): protecting
-/// only the tets whose four corners are on the sphere keeps them positive, but the tets with
-/// three corners on the sphere are constrained almost as tightly (three corners fixed to a
-/// cap, one free), and the untangler then stalls on those instead; protection is the building
-/// block for holding a whole boundary layer. No other caller in the library yet.
+/// The ball target protects every tet with three or four corners on the sphere
+/// ([`crate::vol::ball::slide_on_sphere`]): protecting only those with four left the untangler
+/// stalled on those with three (three corners on a cap, the fourth in the thin lens under it),
+/// BENCHMARKS.md.
 #[allow(clippy::too_many_arguments)]
 pub fn untangle_protected(
     tets: &[[u32; 4]],
