@@ -9,13 +9,14 @@
 //! its neighbours at its own level: the surface is simplified by edge collapses to a
 //! tetrahedron, which is embedded exactly, and the vertices come back in reverse order, each
 //! placed inside its ring (where every triangle around it is positive), the whole level
-//! relaxed towards the areas of the rest surface whenever the vertex count has doubled.
+//! relaxed towards equal areas whenever the vertex count has doubled (the last level is left
+//! to the caller, who relaxes it against the rest faces).
 //!
 //! The construction cannot produce a folded embedding: a vertex is only placed where all its
-//! triangles are positive (such a place exists near the vertex it was collapsed into, whose
-//! triangles are positive, so the search along that direction ends there), and the relaxation
-//! takes only fold-free steps. It can fail only by running out of resolution in that search,
-//! which the caller reports.
+//! triangles are positive (such a place exists next to the vertex it was collapsed into, whose
+//! triangles are positive, unless the two faces they share are exactly opposite there), and
+//! the relaxation takes only fold-free steps. It can fail only by running out of resolution
+//! in that search (None), and the caller then falls back to another embedding.
 
 use super::ball::{relax_on_sphere, FaceReference};
 use super::newton::NewtonOptions;
