@@ -398,8 +398,8 @@ pub fn sphere_deviation(mesh: &TetMesh, x: &[[f64; 3]]) -> f64 {
 /// Why: a fixed spherical embedding can invert tets whose four corners are all boundary
 /// vertices (tets spanning a thin protrusion, placed by the surface embedding alone), and then
 /// no map with that boundary exists. The sphere is the target, not one parametrisation of it,
-/// so the boundary slides; the tets with three or four boundary corners are protected once
-/// positive (see the comment at the call).
+/// so the boundary slides; the tets with three or four boundary corners that are positive at
+/// the start are protected (see the comment at the call).
 pub fn slide_on_sphere(
     mesh: &TetMesh,
     start: &[[f64; 3]],
@@ -416,8 +416,8 @@ pub fn slide_on_sphere(
     }
     let fixed = vec![false; x.len()];
     let inverted_start = mesh.inverted(&x).len();
-    // Tets with three or four boundary corners keep the barrier of the untangling energy's
-    // ε → 0 limit once positive: sliding spreads the boundary where the interior needs room,
+    // Tets with three or four boundary corners that are positive at the start keep the
+    // barrier of the untangling energy's ε → 0 limit: sliding spreads the boundary where the interior needs room,
     // and without the barrier it also flattens such tets through zero (a tet with four
     // corners on the sphere, or three and an interior corner in the thin lens under a small
     // cap, has no interior side to escape to), after which no ε brings them back.
