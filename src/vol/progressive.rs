@@ -147,8 +147,10 @@ pub fn progressive_embedding(
         pos[v as usize] = c;
         present[v as usize] = true;
     }
-    let live: Vec<usize> = (0..tri.len()).filter(|&f| alive_face[f]).collect();
-    let t0 = tri[live[0]].map(|v| pos[v as usize]);
+    let Some(first) = (0..tri.len()).find(|&f| alive_face[f]) else {
+        return Ok(None);
+    };
+    let t0 = tri[first].map(|v| pos[v as usize]);
     if !chordal_positive(t0[0], t0[1], t0[2]) {
         for p in pos.iter_mut() {
             p[0] = -p[0];

@@ -14,7 +14,9 @@ use crate::common::Rng;
 
 use foldfree::vol::newton::{corners_of, Corner};
 use foldfree::vol::untangle::vulkan::DeviceTets;
-use foldfree::vol::untangle::{tet_terms, untangle_sliding, UntangleOptions};
+use foldfree::vol::untangle::{
+    tet_terms, untangle_sliding, untangle_sliding_protected, UntangleOptions,
+};
 use foldfree::vol::TetMesh;
 use gpu_common::with_test_context;
 
@@ -259,5 +261,53 @@ fn device_untangler_untangles_the_tangled_grid() {
             "tangled grid: {start} inverted; device {} L-BFGS steps, CPU {}",
             s.iterations, c.iterations
         );
+    });
+}
+
+/// The protected untangling (the ball target's default: flagged tets keep the ε → 0 barrier,
+/// recomputed on the host after the device's per-tet terms) on the device and on the CPU:
+/// here the tets with a fixed corner are flagged; both untangle the grid, and no flagged tet
+/// that was positive at the start is inverted at the end.
+#[test]
+fn device_protected_untangler_keeps_flagged_tets_positive() {
+    with_test_context(|ctx| {
+        let (m, x0, fixed) = tangled_grid();
+        let flag: Vec<bool> = m
+            .tets
+            .iter()
+            .map(|t| t.iter().any(|&v| fixed[v as usize]))
+            .collect();
+        let positive: Vec<bool> = (0..m.tets.len())
+            .map(|t| !m.inverted(&x0).contains(&t))
+            .collect();
+        assert!(flag.iter().zip(&positive).any(|(&f, &p)| f && p));
+        for device in [Some(ctx), None] {
+            let mut x = x0.clone();
+            let s = untangle_sliding_protected(
+                &m,
+                &mut x,
+                &fixed,
+                &[],
+                &flag,
+                &UntangleOptions::default(),
+                device,
+            )
+            .unwrap();
+            let after = m.inverted(&x);
+            assert_eq!(s.inverted, after.len());
+            assert_eq!(
+                s.inverted,
+                0,
+                "{} left {} inverted",
+                if device.is_some() { "device" } else { "CPU" },
+                s.inverted
+            );
+            for t in 0..m.tets.len() {
+                assert!(
+                    !(flag[t] && positive[t] && after.contains(&t)),
+                    "protected tet {t} inverted"
+                );
+            }
+        }
     });
 }

@@ -250,9 +250,10 @@ impl Scaffold {
     /// One triangle `[c, e, a]` per edge `(a, b)` shared by two scaffold triangles `(a, b, c)`
     /// and `(b, a, e)`: it holds the edge `c–e` that flipping `(a, b)` would create. A
     /// re-triangulation that differs from this one by such flips only is served by a pattern
-    /// that has these edges too, unchanged ([`super::assembly::Pattern::rebind`]); measured:
-    /// 14 of 26 re-triangulations on octopus_mainComp_f6000, 1 of 8–14 on cow2 and horse,
-    /// where the boundary moves farther between them (BENCHMARKS.md, round 3).
+    /// that has these edges too, unchanged ([`super::assembly::Pattern::rebind`]). It serves
+    /// when the boundary moves little between re-triangulations: the Delaunay triangulations
+    /// of nearby point sets differ by few flips, and by more the farther the points move (how
+    /// often it serves on the corpus: BENCHMARKS.md, round 3).
     pub fn flip_diagonals(&self) -> Vec<[u32; 3]> {
         // Directed edge (a, b) → opposite corner, for every triangle.
         let mut half: Vec<([u32; 2], u32)> = self
