@@ -13,9 +13,10 @@ use foldfree::approx::boundary_l0::{planarize, BoundaryL0Options};
 use foldfree::approx::cluster::{cluster_faces, ClusterOptions};
 use foldfree::approx::geom::{bbox_diagonal, dot, face_normals_areas, V3};
 use foldfree::approx::normals_l0::{smooth_normals, NormalL0Options};
+use foldfree::approx::outline::{self, Moments, Surface};
 use foldfree::approx::polygons::ear_clip;
 use foldfree::approx::vertex_update::{update_vertices, VertexUpdateOptions};
-use foldfree::approx::{approximate, ApproxOptions};
+use foldfree::approx::{approximate, ApproxOptions, Construction};
 use foldfree::mesh::{Topology, TriMesh};
 
 /// Deterministic noise in [-1, 1]. Not `common::Rng`: the plane counts below were calibrated on
@@ -291,6 +292,7 @@ fn pipeline_turns_a_noisy_cube_into_six_planar_squares() {
     assert!(out.polygons.polygons.iter().all(|p| p.len() == 4));
     assert_eq!(out.polygons.triangulate().len(), 12);
     assert!(r.notes.is_empty(), "{:?}", r.notes);
+    assert_watertight(&out.polygons.polygons);
     // Same seed, same output.
     let again = approximate(&m, &t, &ApproxOptions::new(24), &mut |_| {}).unwrap();
     assert_eq!(again.positions, out.positions);
@@ -306,7 +308,10 @@ fn pipeline_turns_a_noisy_grid_into_one_square() {
     assert!(r.max_planarity_deviation_rel <= 1e-6);
     assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
     assert_eq!(r.polygons, 1);
-    assert_eq!(r.corners, 4);
+    // The outline keeps the border's vertices (projected into the plane) where they are not
+    // on a straight line to rounding: at least the square's four.
+    assert!(r.corners >= 4, "{}", r.corners);
+    assert_eq!(out.faces.len() + 2, out.polygons.polygons[0].len());
 }
 
 #[test]
@@ -390,6 +395,12 @@ fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
     };
     let o = run(&[&poly, &rep], &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // OUT.obj: the polygons' triangles (a cube's 8 corners, 2 triangles per side).
+    let (v, f) = obj_counts(&out);
+    assert_eq!((v.len(), f.len()), (8, 12));
+    // The pressed construction keeps the input's vertices and faces in order.
+    let o = run(&[], &["--construction", "press"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (v, f) = obj_counts(&out);
     assert_eq!(v.len(), m.positions.len());
     let faces: Vec<Vec<usize>> = m
@@ -407,6 +418,8 @@ fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
     assert!(r["mean_input_distance"].as_f64().unwrap() > 0.0);
     assert!(r["seconds"]["total"].as_f64().is_some());
 
+    let o = run(&[&poly, &rep], &[]);
+    assert!(o.status.success());
     let o = run(&[&tri], &["--triangulate"]);
     assert!(o.status.success());
     let (_, tf) = obj_counts(&tri);
@@ -593,7 +606,12 @@ fn restarts_keep_the_best_run_and_stop_when_clean() {
     let m = tube(24, 4);
     let t = topo(&m);
     let bad = |r: &foldfree::approx::ApproxReport| r.flipped_faces + r.degenerate_faces;
-    let mut opts = ApproxOptions::new(2);
+    // The pressed construction: restarts are its answer to folds.
+    let new = |k: usize| ApproxOptions {
+        construction: Construction::Press,
+        ..ApproxOptions::new(k)
+    };
+    let mut opts = new(2);
     opts.restarts = 0;
     let first = approximate(&m, &t, &opts, &mut |_| {}).unwrap().report;
     assert!(bad(&first) > 0, "the first run must fold for this test");
@@ -606,14 +624,88 @@ fn restarts_keep_the_best_run_and_stop_when_clean() {
     assert!(bad(&best) <= bad(&first));
     assert!(best.seconds_all_runs >= best.seconds.total);
     // The returned run is the one of its seed.
-    let mut again = ApproxOptions::new(2);
+    let mut again = new(2);
     again.restarts = 0;
     again.seed = best.seed_used;
     let one = approximate(&m, &t, &again, &mut |_| {}).unwrap().report;
     assert_eq!(bad(&one), bad(&best));
     // Clean on the first run: no restart.
-    let mut clean = ApproxOptions::new(8);
+    let mut clean = new(8);
     clean.restart_min_bad = 1;
     let r = approximate(&m, &t, &clean, &mut |_| {}).unwrap().report;
     assert_eq!((bad(&r), r.runs), (0, 1));
+}
+
+/// Every polygon edge is used once in each direction (by two polygons, or twice by one
+/// across a hole's bridge): a closed, consistently oriented polygon mesh.
+fn assert_watertight(polygons: &[Vec<u32>]) {
+    let mut uses = std::collections::HashMap::new();
+    for p in polygons {
+        for k in 0..p.len() {
+            *uses.entry((p[k], p[(k + 1) % p.len()])).or_insert(0) += 1;
+        }
+    }
+    for (&(a, b), &n) in &uses {
+        assert_eq!(n, 1, "edge {a}→{b} used {n} times");
+        assert_eq!(uses.get(&(b, a)), Some(&1), "edge {a}→{b} has no twin");
+    }
+}
+
+/// Known answers of the moments: triangles of one plane fit it exactly; two parallel planes
+/// merged fit their middle plane with the residual of their offset (∫ d² dA = A·h²).
+#[test]
+fn moments_fit_planes_and_measure_a_merge() {
+    let tri =
+        |z: f64| {
+            Moments::triangle([0.0, 0.0, z], [10.0, 0.0, z], [0.0, 10.0, z]).add(
+                &Moments::triangle([10.0, 0.0, z], [10.0, 10.0, z], [0.0, 10.0, z]),
+            )
+        };
+    let (p, res) = tri(3.0).fit().unwrap();
+    assert!(
+        (p.n[2] - 1.0).abs() < 1e-12 && (p.d + 3.0).abs() < 1e-12,
+        "{p:?}"
+    );
+    assert!(res.abs() < 1e-9);
+    // z = 1 and z = 3, area 100 each (wider than apart): the plane z = 2, every point 1
+    // away: 200.
+    let (p, res) = tri(1.0).add(&tri(3.0)).fit().unwrap();
+    assert!(
+        (p.n[2] - 1.0).abs() < 1e-12 && (p.d + 2.0).abs() < 1e-9,
+        "{p:?}"
+    );
+    assert!((res - 200.0).abs() < 1e-6, "{res}");
+}
+
+/// Validity first: a noisy cube given as one region (a closed surface, which no polygon can
+/// bound) is split until its planes realise it — the six sides, each a square sharing the
+/// cube's eight corners.
+#[test]
+fn outline_splits_an_unrealisable_partition_into_the_cube_sides() {
+    let m = noisy_cube(6, 0.01, 21);
+    let t = topo(&m);
+    let (normals, areas) = face_normals_areas(&m.positions, &m.faces);
+    let s = Surface {
+        topo: &t,
+        pos: &m.positions,
+        faces: &m.faces,
+        normals: &normals,
+        areas: &areas,
+    };
+    let r = outline::realise(&s, vec![0; m.faces.len()], 1, 6).unwrap();
+    assert_eq!(r.planes.len(), 6);
+    assert_eq!(r.merges, 0);
+    assert!(r.splits >= 5 && !r.defects.is_empty());
+    assert_eq!(r.polygons.positions.len(), 8);
+    assert!(r.polygons.polygons.iter().all(|p| p.len() == 4));
+    assert_eq!(r.triangles.len(), 12);
+    assert_watertight(&r.polygons.polygons);
+    // Each side's plane is an axis plane of the unit cube, to the noise.
+    for p in &r.planes {
+        let axis = (0..3)
+            .max_by(|&a, &b| p.n[a].abs().total_cmp(&p.n[b].abs()))
+            .unwrap();
+        let off = p.d.abs().min((p.d.abs() - 1.0).abs());
+        assert!(p.n[axis].abs() > 0.999 && off < 0.02, "{p:?}");
+    }
 }

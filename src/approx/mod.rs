@@ -1,6 +1,14 @@
 //! Planar-polygon approximation of a triangle mesh (Hu & Zhang 2017, "Shape approximation via
 //! sparse optimization"): represent the surface by at most K planar regions.
 //!
+//! The partition (stages 1–3 below) is found by the paper's method. The polygons are then made
+//! by [`outline`] (the default, [`Construction::Outline`]): each region's plane is the
+//! least-squares plane of its input faces, corners are where the planes meet, and where they
+//! cannot realise the partition the partition is split or merged, never the positions — a
+//! fold-free, watertight polygon mesh follows from the construction, or nothing is written.
+//! [`Construction::Press`] is the previous stage 4 below, kept for comparison until the outline
+//! covers its cases (issue 23); it and the fold repairs it needs go once it does.
+//!
 //! Pipeline (all CPU, sparse systems solved by CG):
 //! 1. [`normals_l0`]: L0 smoothing of face normals (ALM) → piecewise-constant normals;
 //! 2. [`vertex_update`]: vertices follow the smoothed normals (Poisson-type least squares);
@@ -31,9 +39,11 @@ pub mod boundary_l0;
 pub mod cluster;
 pub mod dissolve;
 pub mod geom;
+pub mod intersect;
 pub mod lloyd;
 pub mod normals_l0;
 pub mod nudge;
+pub mod outline;
 pub mod polygons;
 pub mod reassign;
 pub mod slide;
@@ -66,6 +76,10 @@ pub enum ApproxError {
     /// is not written.
     #[error("approx: {0}")]
     BadOutput(String),
+    /// No partition tried could be realised as a polygon mesh ([`outline::Defect`]); nothing
+    /// is written.
+    #[error("approx: {0}")]
+    Unrealisable(String),
 }
 
 impl ApproxError {
@@ -73,9 +87,22 @@ impl ApproxError {
     pub fn exit_code(&self) -> i32 {
         match self {
             ApproxError::Mesh(_) | ApproxError::BadInput(_) => 2,
-            ApproxError::Solve(_) | ApproxError::BadOutput(_) => 1,
+            ApproxError::Solve(_) | ApproxError::BadOutput(_) | ApproxError::Unrealisable(_) => 1,
         }
     }
+}
+
+/// How the polygons are made from the partition.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "snake_case")]
+pub enum Construction {
+    /// The input's vertices pressed onto the planes (boundary L0 with planarity constraints,
+    /// then the fold repairs); OUT.obj keeps the input's connectivity.
+    Press,
+    /// Corners where the planes meet, the partition changed where that fails
+    /// ([`outline`]); OUT.obj is the triangulation of the polygons. Experimental (issue 23).
+    Outline,
 }
 
 /// All parameters of [`approximate`].
@@ -146,6 +173,7 @@ pub struct ApproxOptions {
     /// are used (see [`split`]); 0 = off.
     pub split_trials: usize,
     pub boundary: BoundaryL0Options,
+    pub construction: Construction,
 }
 
 impl ApproxOptions {
@@ -202,6 +230,7 @@ impl ApproxOptions {
             max_cone_deg: 45.0,
             min_angle_deg: 3.0,
             boundary: BoundaryL0Options::default(),
+            construction: Construction::Outline,
         }
     }
 }
@@ -281,6 +310,9 @@ pub struct ApproxReport {
     pub flipped_vs_input: usize,
     /// Output faces with area ≤ 1e-12·diag².
     pub degenerate_faces: usize,
+    /// Two polygons cross each other (checked on their triangles): the polygon mesh is not
+    /// an embedded surface, and the result is not written.
+    pub polygons_cross: bool,
     /// Faces moved to a neighbouring region: all three corners shared with it, or two of
     /// three edge-neighbours in it (boundary smoothing).
     pub faces_reassigned: usize,
@@ -336,8 +368,10 @@ pub struct ApproxReport {
 /// Result of [`approximate`].
 #[derive(Clone, Debug)]
 pub struct ApproxOutput {
-    /// Moved vertices, same order as the input (OUT.obj).
+    /// Output vertices (OUT.obj).
     pub positions: Vec<V3>,
+    /// Output triangles (OUT.obj).
+    pub faces: Vec<[u32; 3]>,
     pub face_cluster: Vec<u32>,
     pub planes: Vec<Option<Plane>>,
     pub polygons: polygons::PolygonMesh,
@@ -360,6 +394,13 @@ impl ApproxOutput {
             return Err(ApproxError::BadOutput(
                 "a polygon corner is not finite; nothing was written".into(),
             ));
+        }
+        if r.polygons_cross {
+            return Err(ApproxError::BadOutput(format!(
+                "the best of {} run(s) at K = {} has polygons crossing each other; nothing was \
+                 written (another K, --seed or more --restarts may avoid them)",
+                r.runs, r.k_requested
+            )));
         }
         if r.flipped_faces + r.degenerate_faces == 0 {
             return Ok(());
@@ -423,23 +464,45 @@ fn best_run(
     progress: &mut dyn FnMut(Stage),
 ) -> Result<ApproxOutput, ApproxError> {
     let t = Instant::now();
-    let bad = |o: &ApproxOutput| o.report.flipped_faces + o.report.degenerate_faces;
-    let mut best = run_once(mesh, topo, opts, progress)?;
-    let mut runs = 1;
+    let bad = |o: &ApproxOutput| {
+        o.report.flipped_faces + o.report.degenerate_faces + usize::from(o.report.polygons_cross)
+    };
+    // Fewest bad faces, then the smaller mean distance.
+    let key = |o: &ApproxOutput| (bad(o), o.report.mean_input_distance);
+    let mut best: Option<ApproxOutput> = None;
+    let mut unrealised: Option<ApproxError> = None;
+    let mut runs = 0;
     let mut sub = opts.clone();
-    for i in 1..=opts.restarts {
-        if bad(&best) < opts.restart_min_bad.max(1) {
+    for i in 0..=opts.restarts {
+        if best
+            .as_ref()
+            .is_some_and(|b| bad(b) < opts.restart_min_bad.max(1))
+        {
             break;
         }
         sub.seed = opts.seed.wrapping_add(i as u64);
-        let out = run_once(mesh, topo, &sub, progress)?;
         runs += 1;
-        // Fewest bad faces, then the smaller mean distance.
-        let key = |o: &ApproxOutput| (bad(o), o.report.mean_input_distance);
-        if key(&out) < key(&best) {
-            best = out;
+        match run_once(mesh, topo, &sub, progress) {
+            Ok(out) => {
+                if best.as_ref().is_none_or(|b| key(&out) < key(b)) {
+                    best = Some(out);
+                }
+            }
+            // Another seed's partition may be realisable.
+            Err(e @ ApproxError::Unrealisable(_)) => unrealised = Some(e),
+            Err(e) => return Err(e),
         }
     }
+    let Some(mut best) = best else {
+        let why = unrealised.map_or_else(String::new, |e| e.to_string());
+        return Err(ApproxError::Unrealisable(format!(
+            "no run of seeds {}..={} gave a valid polygon mesh with at most K = {} regions (the \
+             last: {why}); nothing was written (a larger K, or more --restarts, may)",
+            opts.seed,
+            opts.seed.wrapping_add(opts.restarts as u64),
+            opts.k
+        )));
+    };
     best.report.runs = runs;
     best.report.seconds_all_runs = t.elapsed().as_secs_f64();
     Ok(best)
@@ -523,6 +586,27 @@ fn run_once(
     let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
     let n_clusters = renumber(&mut face_cluster);
     times.cluster = t.elapsed().as_secs_f64();
+    if opts.construction == Construction::Outline {
+        progress(Stage::Polygons);
+        let surface = outline::Surface {
+            topo,
+            pos: &mesh.positions,
+            faces: &mesh.faces,
+            normals: &n0,
+            areas: &a0,
+        };
+        return outline_run(
+            mesh,
+            &surface,
+            opts,
+            face_cluster,
+            n_clusters,
+            &cl,
+            times,
+            t_all,
+            diag,
+        );
+    }
     let m1 = TriMesh {
         positions: m1.positions,
         faces: mesh.faces.clone(),
@@ -847,6 +931,7 @@ fn run_once(
         flipped_faces: flipped,
         flipped_vs_input: flipped_in,
         degenerate_faces: degenerate,
+        polygons_cross: polys.crossing().is_some(),
         faces_reassigned: reassigned + smoothed,
         fold_moves: faces_moved,
         slides_kept,
@@ -878,9 +963,164 @@ fn run_once(
     };
     Ok(ApproxOutput {
         positions: pl.positions,
+        faces: mesh.faces.clone(),
         face_cluster,
         planes: pl.planes,
         polygons: polys,
+        report,
+    })
+}
+
+/// The partition realised by [`outline::realise`]: polygons whose corners are where the
+/// planes meet, merged where it cannot be realised.
+#[allow(clippy::too_many_arguments)]
+fn outline_run(
+    mesh: &TriMesh,
+    surface: &outline::Surface<'_>,
+    opts: &ApproxOptions,
+    face_cluster: Vec<u32>,
+    n_clusters: usize,
+    cl: &cluster::Clustering,
+    mut times: StageTimes,
+    t_all: Instant,
+    diag: f64,
+) -> Result<ApproxOutput, ApproxError> {
+    let topo = surface.topo;
+    let t = Instant::now();
+    let r = outline::realise(surface, face_cluster, n_clusters, opts.k)
+        .map_err(|d| ApproxError::Unrealisable(format!("seed {}: {d}", opts.seed)))?;
+    times.polygons = t.elapsed().as_secs_f64();
+    times.total = t_all.elapsed().as_secs_f64();
+    let planes: Vec<Option<Plane>> = r.planes.iter().map(|&p| Some(p)).collect();
+    let vc = cluster::vertex_clusters(topo, &r.labels);
+    let (mut sum, mut cnt, mut maxd) = (0.0, 0usize, 0.0f64);
+    for (v, cs) in vc.iter().enumerate() {
+        let ds: Vec<f64> = cs
+            .iter()
+            .map(|&c| {
+                r.planes[c as usize]
+                    .signed_distance(mesh.positions[v])
+                    .abs()
+            })
+            .collect();
+        if !ds.is_empty() {
+            sum += ds.iter().sum::<f64>() / ds.len() as f64;
+            cnt += 1;
+            maxd = ds.iter().copied().fold(maxd, f64::max);
+        }
+    }
+    let mean = sum / cnt.max(1) as f64;
+    let mut maxp = 0.0f64;
+    for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
+        for &c in poly {
+            maxp = maxp.max(
+                r.planes[reg as usize]
+                    .signed_distance(r.polygons.positions[c as usize])
+                    .abs(),
+            );
+        }
+    }
+    let (n_out, a_out) = face_normals_areas(&r.polygons.positions, &r.triangles);
+    let mut tri_region = Vec::new();
+    for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
+        let _ = poly;
+        tri_region.push(reg);
+    }
+    let mut flipped = 0;
+    let mut degenerate = 0;
+    // Triangles are emitted polygon by polygon; recover each one's region by its corners.
+    let corner_regions = {
+        let mut m: Vec<Vec<u32>> = vec![Vec::new(); r.polygons.positions.len()];
+        for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
+            for &c in poly {
+                m[c as usize].push(reg);
+            }
+        }
+        m
+    };
+    for (f, t) in r.triangles.iter().enumerate() {
+        if a_out[f] <= 1e-12 * diag * diag {
+            degenerate += 1;
+            continue;
+        }
+        let common = corner_regions[t[0] as usize].iter().find(|x| {
+            corner_regions[t[1] as usize].contains(x) && corner_regions[t[2] as usize].contains(x)
+        });
+        if let Some(&reg) = common {
+            flipped += usize::from(dot(n_out[f], r.planes[reg as usize].n) <= 0.0);
+        }
+    }
+    let rel = |x: f64| if diag > 0.0 { x / diag } else { 0.0 };
+    let mut notes = Vec::new();
+    if r.merges > 0 {
+        notes.push(format!(
+            "{} regions (K = {}): {} splits and {} merges answered {} partitions the planes could not realise",
+            r.planes.len(),
+            opts.k,
+            r.splits,
+            r.merges,
+            r.defects.len()
+        ));
+    }
+    let k = r.planes.len();
+    let mut report = ApproxReport {
+        faces: mesh.faces.len(),
+        seed_used: opts.seed,
+        runs: 1,
+        seconds_all_runs: times.total,
+        vertices: mesh.positions.len(),
+        k_requested: opts.k,
+        k_obtained: k,
+        regions_grown: cl.grown,
+        regions_merged: cl.count,
+        final_angle_deg: cl.final_angle_deg,
+        bbox_diagonal: diag,
+        mean_input_distance: mean,
+        mean_input_distance_rel: rel(mean),
+        max_input_distance: maxd,
+        max_input_distance_rel: rel(maxd),
+        max_planarity_deviation: maxp,
+        max_planarity_deviation_rel: rel(maxp),
+        flipped_faces: flipped,
+        flipped_vs_input: 0,
+        degenerate_faces: degenerate,
+        polygons_cross: false,
+        faces_reassigned: 0,
+        fold_moves: 0,
+        slides_kept: 0,
+        regions_dissolved: 0,
+        regions_absorbed: 0,
+        rings_moved: 0,
+        planes_nudged: 0,
+        chains_respaced: 0,
+        fold_repairs: 0,
+        regions_untangled: 0,
+        lloyd_rounds: 0,
+        regions_split: r.splits,
+        split_passes: 0,
+        merge_passes: r.merges,
+        corner_merges: 0,
+        vertices_on_4plus_planes: 0,
+        unresolved_vertices_4plus: 0,
+        unresolved_vertices_other: 0,
+        crease_edges: 0,
+        alm_rounds_normals: 0,
+        alm_rounds_boundary: 0,
+        projection_rounds: 0,
+        polygons: r.polygons.polygons.len(),
+        polygon_holes: r.polygons.holes,
+        corners: r.polygons.positions.len(),
+        seconds: times,
+        notes,
+        options: opts.clone(),
+    };
+    report.runs = 1;
+    Ok(ApproxOutput {
+        positions: r.polygons.positions.clone(),
+        faces: r.triangles.clone(),
+        face_cluster: r.labels,
+        planes,
+        polygons: r.polygons,
         report,
     })
 }

@@ -144,6 +144,53 @@ pub fn ear_clip(p: &[[f64; 2]]) -> Vec<[usize; 3]> {
     tris
 }
 
+/// The outer loop `outer` with the `holes` joined in by bridges (a keyhole polygon, what an
+/// OBJ face can hold), each from the hole's rightmost point to the nearest corner it sees;
+/// corners are indices whose 2D positions `to2` gives.
+pub fn bridge_holes(
+    outer: &[u32],
+    mut holes: Vec<Vec<u32>>,
+    to2: &dyn Fn(u32) -> [f64; 2],
+) -> Vec<u32> {
+    let mut poly = outer.to_vec();
+    // Bridge holes in order of their rightmost point (classic keyhole construction).
+    let rightmost = |h: &[u32]| h.iter().map(|&v| to2(v)[0]).fold(f64::MIN, f64::max);
+    holes.sort_by(|a, b| rightmost(b).total_cmp(&rightmost(a)));
+    let all: Vec<Vec<u32>> = holes.clone();
+    for h in &holes {
+        let hi = (0..h.len())
+            .max_by(|&a, &b| to2(h[a])[0].total_cmp(&to2(h[b])[0]))
+            .unwrap_or(0);
+        let hp = to2(h[hi]);
+        let all_edges: Vec<([f64; 2], [f64; 2])> = all
+            .iter()
+            .chain(std::iter::once(&poly))
+            .flat_map(|l| (0..l.len()).map(move |i| (l[i], l[(i + 1) % l.len()])))
+            .map(|(a, b)| (to2(a), to2(b)))
+            .collect();
+        let mut cand: Vec<usize> = (0..poly.len()).collect();
+        let d2 = |i: usize| {
+            let q = to2(poly[i]);
+            (q[0] - hp[0]).powi(2) + (q[1] - hp[1]).powi(2)
+        };
+        cand.sort_by(|&a, &b| d2(a).total_cmp(&d2(b)));
+        let pick = cand
+            .iter()
+            .copied()
+            .find(|&i| {
+                let q = to2(poly[i]);
+                !all_edges.iter().any(|&(a, b)| segments_cross(hp, q, a, b))
+            })
+            .or(cand.first().copied());
+        let Some(pi) = pick else { continue };
+        let mut merged: Vec<u32> = poly[..=pi].to_vec();
+        merged.extend((0..=h.len()).map(|k| h[(hi + k) % h.len()]));
+        merged.extend_from_slice(&poly[pi..]);
+        poly = merged;
+    }
+    poly
+}
+
 /// Builds the polygons of all regions on the output positions `pos`.
 pub fn extract(
     topo: &Topology,
@@ -215,49 +262,12 @@ pub fn extract(
         let outer = (0..cloops.len())
             .max_by(|&a, &b| areas[a].total_cmp(&areas[b]))
             .unwrap_or(0);
-        let mut poly = cloops[outer].clone();
-        let mut holes: Vec<&Vec<u32>> = (0..cloops.len())
+        let holes: Vec<Vec<u32>> = (0..cloops.len())
             .filter(|&i| i != outer)
-            .map(|i| &cloops[i])
+            .map(|i| cloops[i].clone())
             .collect();
-        // Bridge holes in order of their rightmost point (classic keyhole construction).
-        holes.sort_by(|a, b| {
-            let ma = a.iter().map(|&v| to2(v)[0]).fold(f64::MIN, f64::max);
-            let mb = b.iter().map(|&v| to2(v)[0]).fold(f64::MIN, f64::max);
-            mb.total_cmp(&ma)
-        });
-        for h in holes {
-            let hi = (0..h.len())
-                .max_by(|&a, &b| to2(h[a])[0].total_cmp(&to2(h[b])[0]))
-                .unwrap_or(0);
-            let hp = to2(h[hi]);
-            let all_edges: Vec<([f64; 2], [f64; 2])> = cloops
-                .iter()
-                .chain(std::iter::once(&poly))
-                .flat_map(|l| (0..l.len()).map(move |i| (l[i], l[(i + 1) % l.len()])))
-                .map(|(a, b)| (to2(a), to2(b)))
-                .collect();
-            let mut cand: Vec<usize> = (0..poly.len()).collect();
-            let d2 = |i: usize| {
-                let q = to2(poly[i]);
-                (q[0] - hp[0]).powi(2) + (q[1] - hp[1]).powi(2)
-            };
-            cand.sort_by(|&a, &b| d2(a).total_cmp(&d2(b)));
-            let pick = cand
-                .iter()
-                .copied()
-                .find(|&i| {
-                    let q = to2(poly[i]);
-                    !all_edges.iter().any(|&(a, b)| segments_cross(hp, q, a, b))
-                })
-                .or(cand.first().copied());
-            let Some(pi) = pick else { continue };
-            let mut merged: Vec<u32> = poly[..=pi].to_vec();
-            merged.extend((0..=h.len()).map(|k| h[(hi + k) % h.len()]));
-            merged.extend_from_slice(&poly[pi..]);
-            poly = merged;
-            out.holes += 1;
-        }
+        out.holes += holes.len();
+        let poly = bridge_holes(&cloops[outer], holes, &to2);
         let ids: Vec<u32> = poly
             .iter()
             .map(|&v| {
@@ -278,8 +288,20 @@ pub fn extract(
 impl PolygonMesh {
     /// Triangles of all polygons (ear clipping in each region's plane), indices into `positions`.
     pub fn triangulate(&self) -> Vec<[u32; 3]> {
+        self.triangulate_with_regions().0
+    }
+
+    /// Whether two polygons cross each other (their triangles, [`super::intersect`]).
+    pub fn crossing(&self) -> Option<[u32; 2]> {
+        let (tris, region) = self.triangulate_with_regions();
+        super::intersect::first_crossing(&self.positions, &tris, &region)
+    }
+
+    /// [`PolygonMesh::triangulate`] and the region of each triangle.
+    pub fn triangulate_with_regions(&self) -> (Vec<[u32; 3]>, Vec<u32>) {
         let mut tris = Vec::new();
-        for poly in &self.polygons {
+        let mut regions = Vec::new();
+        for (poly, &reg) in self.polygons.iter().zip(&self.region) {
             let pts: Vec<V3> = poly.iter().map(|&i| self.positions[i as usize]).collect();
             let m = pts.len();
             let mut nrm = [0.0; 3];
@@ -291,9 +313,10 @@ impl PolygonMesh {
             let p2: Vec<[f64; 2]> = pts.iter().map(|&q| [dot(q, u), dot(q, w)]).collect();
             for t in ear_clip(&p2) {
                 tris.push(t.map(|k| poly[k]));
+                regions.push(reg);
             }
         }
-        tris
+        (tris, regions)
     }
 
     /// OBJ text: `v` per corner, `f` per polygon (or per triangle).

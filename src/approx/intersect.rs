@@ -1,0 +1,109 @@
+//! Whether the triangles of two different polygons cross: the polygon mesh's check against
+//! self-intersection (its polygons are planar and share corners exactly, so two of them can
+//! only meet where their corners or edges say, unless their planes cut through each other).
+
+use super::geom::{cross, dot, sub, V3};
+
+/// Six times the signed volume of `a b c d`.
+fn orient3(a: V3, b: V3, c: V3, d: V3) -> f64 {
+    dot(sub(b, a), cross(sub(c, a), sub(d, a)))
+}
+
+/// Whether segment `p q` passes through the interior of triangle `t` (its ends strictly on
+/// opposite sides of the plane, the crossing strictly inside).
+fn segment_crosses(p: V3, q: V3, t: [V3; 3]) -> bool {
+    let (dp, dq) = (orient3(t[0], t[1], t[2], p), orient3(t[0], t[1], t[2], q));
+    // Strictly opposite sides (NaN: no crossing).
+    if (dp * dq).partial_cmp(&0.0) != Some(std::cmp::Ordering::Less) {
+        return false;
+    }
+    let s = [
+        orient3(p, q, t[0], t[1]),
+        orient3(p, q, t[1], t[2]),
+        orient3(p, q, t[2], t[0]),
+    ];
+    (s[0] > 0.0 && s[1] > 0.0 && s[2] > 0.0) || (s[0] < 0.0 && s[1] < 0.0 && s[2] < 0.0)
+}
+
+/// Whether triangles `a` and `b` (corner indices into `pos`) cross. Triangles sharing an
+/// edge meet along it; sharing one corner, they cross exactly when an edge opposite the shared
+/// corner passes through the other (their planes' common line starts at the corner and leaves
+/// one of them through that edge); sharing none, when an edge of one passes through the other.
+fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3]) -> bool {
+    let shared: Vec<u32> = a.iter().copied().filter(|x| b.contains(x)).collect();
+    let ta = a.map(|i| pos[i as usize]);
+    let tb = b.map(|i| pos[i as usize]);
+    let edges = |t: [u32; 3]| (0..3).map(move |k| (t[k], t[(k + 1) % 3]));
+    let through =
+        |e: (u32, u32), t: [V3; 3]| segment_crosses(pos[e.0 as usize], pos[e.1 as usize], t);
+    match shared.len() {
+        0 => edges(a).any(|e| through(e, tb)) || edges(b).any(|e| through(e, ta)),
+        1 => {
+            let s = shared[0];
+            let opposite = |t: [u32; 3]| edges(t).find(|&(x, y)| x != s && y != s);
+            opposite(a).is_some_and(|e| through(e, tb))
+                || opposite(b).is_some_and(|e| through(e, ta))
+        }
+        _ => false,
+    }
+}
+
+/// The regions of the first pair of triangles of different regions that cross, if any
+/// (a sweep over the triangles' x extents).
+pub fn first_crossing(pos: &[V3], tris: &[[u32; 3]], region: &[u32]) -> Option<[u32; 2]> {
+    let bbox = |t: &[u32; 3]| {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for &i in t {
+            for k in 0..3 {
+                lo[k] = lo[k].min(pos[i as usize][k]);
+                hi[k] = hi[k].max(pos[i as usize][k]);
+            }
+        }
+        (lo, hi)
+    };
+    let boxes: Vec<(V3, V3)> = tris.iter().map(bbox).collect();
+    let mut order: Vec<usize> = (0..tris.len()).collect();
+    order.sort_by(|&a, &b| boxes[a].0[0].total_cmp(&boxes[b].0[0]));
+    for (i, &a) in order.iter().enumerate() {
+        for &b in &order[i + 1..] {
+            if boxes[b].0[0] > boxes[a].1[0] {
+                break;
+            }
+            if region[a] == region[b]
+                || (1..3).any(|k| boxes[b].0[k] > boxes[a].1[k] || boxes[a].0[k] > boxes[b].1[k])
+            {
+                continue;
+            }
+            if cross_pair(pos, tris[a], tris[b]) {
+                return Some([region[a], region[b]]);
+            }
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crossing_triangles_are_found_and_neighbours_are_not() {
+        let pos = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            // A triangle piercing the first.
+            [0.2, 0.2, -1.0],
+            [0.2, 0.2, 1.0],
+            [0.3, 0.9, 0.0],
+            // A neighbour across the first's edge 0–1, folded up.
+            [0.5, -0.5, 0.5],
+        ];
+        let tris = [[0, 1, 2], [3, 4, 5], [1, 0, 6]];
+        assert_eq!(first_crossing(&pos, &tris[..2], &[0, 1]), Some([0, 1]));
+        assert_eq!(first_crossing(&pos, &[tris[0], tris[2]], &[0, 1]), None);
+        // Same region: not a crossing of the polygon mesh.
+        assert_eq!(first_crossing(&pos, &tris[..2], &[0, 0]), None);
+    }
+}

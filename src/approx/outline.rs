@@ -1,0 +1,1004 @@
+//! Polygons from a partition and its planes: every corner is where planes meet, so each
+//! polygon is planar and neighbouring polygons share their corners exactly (watertight), by
+//! construction rather than by pressing the input's vertices onto the planes.
+//!
+//! Where three regions meet at a vertex of the input, their polygons share one corner: the
+//! common point of the three planes. Where `m > 3` regions meet, `m` planes have no common
+//! point; the junction is split into `m − 2` corners of three planes each (a fan of the cyclic
+//! order of the regions around the vertex, rooted at the region that keeps the corners closest
+//! to the vertex), joined by short edges on plane–plane lines, as in a generic plane
+//! arrangement. Between two corners, the boundary the regions share in the input becomes one
+//! straight edge on the line where their planes meet. On the mesh's border a polygon keeps the
+//! border vertices (projected into its plane); where two regions meet on the border, the
+//! corner is the point of their line nearest to the border vertex.
+//!
+//! The construction can fail where the partition cannot be realised by its planes: planes
+//! nearly parallel meet far from the surface, a loop of a region has fewer than three
+//! corners (a region ringed by one neighbour), a region touches itself at a vertex, or an
+//! outline crosses itself in its plane, two junctions put corners on one point, or two
+//! polygons cross. [`build`] then names the regions involved ([`Defect`]) and [`realise`]
+//! changes the partition (a split, or a merge), never the positions. `FOLDFREE_APPROX_TRACE`
+//! set in the environment prints each defect met to stderr.
+
+use std::collections::{HashMap, HashSet};
+
+use super::geom::{add, cross, dot, normalize, scale, sub, Plane, V3};
+use super::intersect::first_crossing;
+use super::polygons::{bridge_holes, ear_clip, PolygonMesh};
+use crate::linalg::small::sym_eigen;
+use crate::mesh::{Topology, NO_FACE};
+
+/// The region of nothing, beyond the mesh's border.
+const OUTSIDE: u32 = u32::MAX;
+
+/// Area moments of a region's faces: the least-squares plane and its residual without
+/// revisiting the faces, and those of two regions merged by adding.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Moments {
+    area: f64,
+    /// ∫ x dA.
+    first: V3,
+    /// ∫ x xᵀ dA.
+    second: [[f64; 3]; 3],
+    /// Σ area-weighted normals (orients the plane).
+    normal: V3,
+}
+
+impl Moments {
+    /// Moments of triangle `a b c` (exact integrals over the triangle).
+    pub fn triangle(a: V3, b: V3, c: V3) -> Moments {
+        let an = scale(cross(sub(b, a), sub(c, a)), 0.5);
+        let area = dot(an, an).sqrt();
+        let s = add(add(a, b), c);
+        let mut second = [[0.0; 3]; 3];
+        for (i, row) in second.iter_mut().enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = area / 12.0 * (a[i] * a[j] + b[i] * b[j] + c[i] * c[j] + s[i] * s[j]);
+            }
+        }
+        Moments {
+            area,
+            first: scale(s, area / 3.0),
+            second,
+            normal: an,
+        }
+    }
+
+    pub fn add(&self, o: &Moments) -> Moments {
+        let mut second = self.second;
+        for (i, row) in second.iter_mut().enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x += o.second[i][j];
+            }
+        }
+        Moments {
+            area: self.area + o.area,
+            first: add(self.first, o.first),
+            second,
+            normal: add(self.normal, o.normal),
+        }
+    }
+
+    /// The plane minimising the integral of the squared distance over the faces, oriented
+    /// along their normals, and that integral.
+    pub fn fit(&self) -> Option<(Plane, f64)> {
+        if self.area <= 0.0 {
+            return None;
+        }
+        let c = scale(self.first, 1.0 / self.area);
+        let mut cov = self.second;
+        for (i, row) in cov.iter_mut().enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x -= self.area * c[i] * c[j];
+            }
+        }
+        let (vals, vecs) = sym_eigen::<3>(&cov);
+        // Eigenvalues decrease: the last vector is the normal, its value the residual.
+        let mut n = normalize([vecs[0][2], vecs[1][2], vecs[2][2]])?;
+        if dot(n, self.normal) < 0.0 {
+            n = scale(n, -1.0);
+        }
+        Some((Plane { n, d: -dot(n, c) }, vals[2].max(0.0)))
+    }
+}
+
+/// Why a partition has no valid polygon mesh, with the regions to change.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum Defect {
+    /// The corner of these regions lies farther from its input vertex than the largest of
+    /// them is wide (planes nearly parallel or nearly concurrent), or on the point of another
+    /// junction's corner.
+    #[error("the corner of regions {regions:?} at vertex {vertex} lies farther from it than the largest of them is wide, or on another junction's corner")]
+    Corner { vertex: u32, regions: Vec<u32> },
+    /// The region occurs twice around one vertex: its polygon would touch itself.
+    #[error("regions {regions:?} meet at vertex {vertex} with one of them twice (its polygon would touch itself)")]
+    Pinch { vertex: u32, regions: Vec<u32> },
+    /// A loop of the region has fewer than three corners.
+    #[error("a boundary loop of region {region} (ringed by regions {neighbors:?}) has fewer than three corners")]
+    Loop { region: u32, neighbors: Vec<u32> },
+    /// The region's outline crosses itself, or a hole lies outside it, in its plane; the
+    /// regions placing the corners of the crossing edges (empty for a hole or orientation).
+    #[error("the outline of region {region} crosses itself in its plane")]
+    Outline { region: u32, regions: Vec<u32> },
+    /// Two polygons cross each other.
+    #[error("the polygons of regions {regions:?} cross each other")]
+    Crossing { regions: [u32; 2] },
+}
+
+impl Defect {
+    /// The regions a split or merge should involve.
+    pub fn regions(&self) -> Vec<u32> {
+        let mut r = match self {
+            Defect::Corner { regions, .. } | Defect::Pinch { regions, .. } => regions.clone(),
+            Defect::Loop { region, neighbors } => {
+                let mut r = neighbors.clone();
+                r.push(*region);
+                r
+            }
+            Defect::Outline { region, regions } if regions.is_empty() => vec![*region],
+            Defect::Outline { regions, .. } => regions.clone(),
+            Defect::Crossing { regions } => regions.to_vec(),
+        };
+        r.retain(|&x| x != OUTSIDE);
+        r
+    }
+}
+
+/// The faces around vertex `v` in counter-clockwise order (seen from the side the faces
+/// face), and whether `v` is on the border (then the order runs from border to border).
+fn star(topo: &Topology, faces: &[[u32; 3]], v: u32) -> (Vec<u32>, bool) {
+    let around = faces_at(topo, v);
+    let Some(&f0) = around.first() else {
+        return (Vec::new(), false);
+    };
+    let slot = |f: u32| faces[f as usize].iter().position(|&x| x == v).unwrap_or(0);
+    let across = |f: u32, side: usize| {
+        let e = topo.face_edges[f as usize][side] as usize;
+        let [a, b] = topo.edge_faces[e];
+        let g = if a == f { b } else { a };
+        (g != NO_FACE).then_some(g)
+    };
+    // Counter-clockwise from f = (v, p, q): the face across the side q → v.
+    let next = |f: u32| across(f, (slot(f) + 2) % 3);
+    // Clockwise: across the side v → p.
+    let prev = |f: u32| across(f, slot(f));
+    // Walk clockwise to the border (if any) so the order starts there.
+    let mut start = f0;
+    let mut border = false;
+    for _ in 0..around.len() {
+        match prev(start) {
+            Some(g) if g != f0 => start = g,
+            Some(_) => break,
+            None => {
+                border = true;
+                break;
+            }
+        }
+    }
+    let mut out = vec![start];
+    let mut f = start;
+    while let Some(g) = next(f) {
+        if g == start || out.len() > around.len() {
+            break;
+        }
+        out.push(g);
+        f = g;
+    }
+    (out, border)
+}
+
+fn faces_at(topo: &Topology, v: u32) -> &[u32] {
+    &topo.vf_faces[topo.vf_offsets[v as usize] as usize..topo.vf_offsets[v as usize + 1] as usize]
+}
+
+/// A corner of the polygon mesh: three regions' planes (the first [`OUTSIDE`] on the border:
+/// then a point of the other two planes' line), or one region's plane at a border vertex.
+#[derive(Clone, Copy, Debug)]
+enum Junction {
+    Three([u32; 3]),
+    Border(u32),
+}
+
+/// Corners at each input vertex, and each region's corners there in the order its outline
+/// passes them.
+struct Corners {
+    positions: Vec<V3>,
+    /// Input vertex each corner belongs to, and the regions whose planes place it.
+    vertex: Vec<u32>,
+    regions: Vec<Vec<u32>>,
+    /// (vertex, region) → that region's corners at the vertex, in outline order.
+    at: HashMap<(u32, u32), Vec<u32>>,
+}
+
+/// Where the planes of `j` meet, nearest to `x`.
+fn place(j: Junction, planes: &[Plane], x: V3) -> Option<V3> {
+    match j {
+        Junction::Border(r) => {
+            let p = planes[r as usize];
+            Some(sub(x, scale(p.n, p.signed_distance(x))))
+        }
+        Junction::Three([a, b, c]) if a == OUTSIDE => {
+            // Nearest point of the line of b and c: x + λ nb + μ nc with both distances 0.
+            let (pb, pc) = (planes[b as usize], planes[c as usize]);
+            let g = dot(pb.n, pc.n);
+            let det = 1.0 - g * g;
+            if det <= 1e-12 {
+                return None;
+            }
+            let (db, dc) = (-pb.signed_distance(x), -pc.signed_distance(x));
+            let l = (db - g * dc) / det;
+            let m = (dc - g * db) / det;
+            Some(add(x, add(scale(pb.n, l), scale(pc.n, m))))
+        }
+        Junction::Three(r) => {
+            let p = r.map(|i| planes[i as usize]);
+            let det = dot(p[0].n, cross(p[1].n, p[2].n));
+            if det.abs() <= 1e-12 {
+                return None;
+            }
+            // Cramer: x = (−d0 (n1×n2) − d1 (n2×n0) − d2 (n0×n1)) / det.
+            let s = add(
+                add(
+                    scale(cross(p[1].n, p[2].n), -p[0].d),
+                    scale(cross(p[2].n, p[0].n), -p[1].d),
+                ),
+                scale(cross(p[0].n, p[1].n), -p[2].d),
+            );
+            Some(scale(s, 1.0 / det))
+        }
+    }
+}
+
+fn bbox_diagonal(pos: &[V3]) -> f64 {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in pos {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let d = sub(hi, lo);
+    dot(d, d).sqrt()
+}
+
+/// Region bounding boxes' diagonals: how far a corner may lie from its vertex.
+fn region_sizes(pos: &[V3], faces: &[[u32; 3]], labels: &[u32], n: usize) -> Vec<f64> {
+    let mut lo = vec![[f64::INFINITY; 3]; n];
+    let mut hi = vec![[f64::NEG_INFINITY; 3]; n];
+    for (f, face) in faces.iter().enumerate() {
+        let r = labels[f] as usize;
+        for &v in face {
+            for k in 0..3 {
+                lo[r][k] = lo[r][k].min(pos[v as usize][k]);
+                hi[r][k] = hi[r][k].max(pos[v as usize][k]);
+            }
+        }
+    }
+    (0..n)
+        .map(|r| {
+            let d = sub(hi[r], lo[r]);
+            dot(d, d).sqrt()
+        })
+        .collect()
+}
+
+/// The corners of every vertex where regions meet (see the module doc); corners of one
+/// junction closer than `tol` are one.
+fn corners(
+    topo: &Topology,
+    pos: &[V3],
+    faces: &[[u32; 3]],
+    labels: &[u32],
+    planes: &[Plane],
+    tol: f64,
+) -> Result<Corners, Defect> {
+    let size = region_sizes(pos, faces, labels, planes.len());
+    let mut out = Corners {
+        positions: Vec::new(),
+        vertex: Vec::new(),
+        regions: Vec::new(),
+        at: HashMap::new(),
+    };
+    let mut triples: HashMap<[u32; 3], u32> = HashMap::new();
+    for v in 0..topo.n_vertices as u32 {
+        let (fs, border) = star(topo, faces, v);
+        if fs.is_empty() {
+            continue;
+        }
+        // Regions in counter-clockwise order, runs collapsed.
+        let mut seq: Vec<u32> = Vec::new();
+        for &f in &fs {
+            let r = labels[f as usize];
+            if seq.last() != Some(&r) {
+                seq.push(r);
+            }
+        }
+        if !border && seq.len() > 1 && seq.first() == seq.last() {
+            seq.pop();
+        }
+        let x = pos[v as usize];
+        if border && seq.len() == 1 {
+            let c = place(Junction::Border(seq[0]), planes, x).ok_or(Defect::Outline {
+                region: seq[0],
+                regions: Vec::new(),
+            })?;
+            out.at.insert((v, seq[0]), vec![out.positions.len() as u32]);
+            out.positions.push(c);
+            out.vertex.push(v);
+            out.regions.push(vec![seq[0]]);
+            continue;
+        }
+        if !border && seq.len() < 3 {
+            continue;
+        }
+        let mut sorted = seq.clone();
+        sorted.sort_unstable();
+        sorted.dedup();
+        if sorted.len() < seq.len() {
+            return Err(Defect::Pinch {
+                vertex: v,
+                regions: sorted,
+            });
+        }
+        // The cycle of the fan: the border's outside first, else the root that keeps the
+        // corners nearest to the vertex.
+        let cycle: Vec<u32> = if border {
+            std::iter::once(OUTSIDE)
+                .chain(seq.iter().copied())
+                .collect()
+        } else {
+            let m = seq.len();
+            let spread = |root: usize| -> f64 {
+                (1..m - 1)
+                    .map(|t| {
+                        let j = Junction::Three([
+                            seq[root],
+                            seq[(root + t) % m],
+                            seq[(root + t + 1) % m],
+                        ]);
+                        place(j, planes, x).map_or(f64::INFINITY, |c| {
+                            let d = sub(c, x);
+                            dot(d, d)
+                        })
+                    })
+                    .fold(0.0, f64::max)
+            };
+            let root = (0..m)
+                .min_by(|&a, &b| spread(a).total_cmp(&spread(b)))
+                .unwrap_or(0);
+            (0..m).map(|t| seq[(root + t) % m]).collect()
+        };
+        let m = cycle.len();
+        let first = out.positions.len();
+        // The corner of each fan triangle t = 1..m−1: (cycle[0], cycle[t], cycle[t + 1]).
+        let mut ids: Vec<u32> = Vec::new();
+        for t in 1..m - 1 {
+            let regions = [cycle[0], cycle[t], cycle[t + 1]];
+            let bad = || Defect::Corner {
+                vertex: v,
+                regions: regions.iter().copied().filter(|&r| r != OUTSIDE).collect(),
+            };
+            // The same three planes at two junctions would put two corners on one point.
+            if !regions.contains(&OUTSIDE) {
+                let mut key = regions;
+                key.sort_unstable();
+                if *triples.entry(key).or_insert(v) != v {
+                    return Err(bad());
+                }
+            }
+            let c = place(Junction::Three(regions), planes, x).ok_or_else(bad)?;
+            let reach = regions
+                .iter()
+                .filter(|&&r| r != OUTSIDE)
+                .map(|&r| size[r as usize])
+                .fold(0.0, f64::max);
+            let d = sub(c, x);
+            if dot(d, d).sqrt() > reach {
+                return Err(bad());
+            }
+            // Four or more planes through one point (a cube's corner cut by a fourth face,
+            // an apex): the fan's corners coincide, and are one corner.
+            let same = (first..out.positions.len()).find(|&i| {
+                let e = sub(out.positions[i], c);
+                dot(e, e).sqrt() <= tol
+            });
+            if let Some(i) = same {
+                ids.push(i as u32);
+                continue;
+            }
+            ids.push(out.positions.len() as u32);
+            out.positions.push(c);
+            out.vertex.push(v);
+            out.regions
+                .push(regions.iter().copied().filter(|&r| r != OUTSIDE).collect());
+        }
+        // Region cycle[j] passes its triangles from the side of its incoming neighbour (the
+        // next region counter-clockwise) to its outgoing one: the root all of them ascending,
+        // the others triangles j then j − 1.
+        for (j, &r) in cycle.iter().enumerate() {
+            if r == OUTSIDE {
+                continue;
+            }
+            let ts: Vec<usize> = if j == 0 {
+                (1..m - 1).collect()
+            } else {
+                [j, j - 1]
+                    .into_iter()
+                    .filter(|&t| t >= 1 && t < m - 1)
+                    .collect()
+            };
+            let mut cs: Vec<u32> = ts.iter().map(|&t| ids[t - 1]).collect();
+            cs.dedup();
+            out.at.insert((v, r), cs);
+        }
+    }
+    Ok(out)
+}
+
+/// Each region's boundary loops as input-vertex cycles, in face direction (counter-clockwise
+/// seen along the normal for the outer loop, clockwise for holes).
+fn loops(topo: &Topology, faces: &[[u32; 3]], labels: &[u32], n: usize) -> Vec<Vec<Vec<u32>>> {
+    let mut next: Vec<HashMap<u32, Vec<u32>>> = vec![HashMap::new(); n];
+    for (f, face) in faces.iter().enumerate() {
+        for k in 0..3 {
+            let [g0, g1] = topo.edge_faces[topo.face_edges[f][k] as usize];
+            let g = if g0 as usize == f { g1 } else { g0 };
+            if g == NO_FACE || labels[g as usize] != labels[f] {
+                next[labels[f] as usize]
+                    .entry(face[k])
+                    .or_default()
+                    .push(face[(k + 1) % 3]);
+            }
+        }
+    }
+    next.into_iter()
+        .map(|mut nx| {
+            let mut starts: Vec<u32> = nx.keys().copied().collect();
+            starts.sort_unstable();
+            let mut out = Vec::new();
+            for s in starts {
+                while nx.get(&s).is_some_and(|v| !v.is_empty()) {
+                    let mut lp = vec![s];
+                    let mut cur = s;
+                    while let Some(b) = nx.get_mut(&cur).and_then(|v| v.pop()) {
+                        if b == s {
+                            break;
+                        }
+                        lp.push(b);
+                        cur = b;
+                    }
+                    out.push(lp);
+                }
+            }
+            out
+        })
+        .collect()
+}
+
+/// A 2D frame of plane `p`.
+fn frame(p: &Plane) -> (V3, V3) {
+    let h = if p.n[0].abs() < 0.9 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
+    let u = normalize(cross(p.n, h)).unwrap_or([1.0, 0.0, 0.0]);
+    (u, cross(p.n, u))
+}
+
+fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+    (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+}
+
+fn signed_area(p: &[[f64; 2]]) -> f64 {
+    (0..p.len())
+        .map(|i| {
+            let (a, b) = (p[i], p[(i + 1) % p.len()]);
+            a[0] * b[1] - a[1] * b[0]
+        })
+        .sum::<f64>()
+        * 0.5
+}
+
+/// Whether segments `ab` and `cd` cross at a point interior to both.
+fn segments_meet(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
+    let (o1, o2) = (orient(a, b, c), orient(a, b, d));
+    let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+    o1 * o2 < 0.0 && o3 * o4 < 0.0
+}
+
+/// Even–odd point-in-polygon test.
+fn inside(p: [f64; 2], poly: &[[f64; 2]]) -> bool {
+    let mut w = false;
+    for i in 0..poly.len() {
+        let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+        if (a[1] > p[1]) != (b[1] > p[1])
+            && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0])
+        {
+            w = !w;
+        }
+    }
+    w
+}
+
+/// Two corners of different junctions closer than `tol`, as a defect.
+fn coincident(cs: &Corners, tol: f64) -> Option<Defect> {
+    let mut order: Vec<usize> = (0..cs.positions.len()).collect();
+    order.sort_by(|&a, &b| cs.positions[a][0].total_cmp(&cs.positions[b][0]));
+    for (i, &a) in order.iter().enumerate() {
+        for &b in &order[i + 1..] {
+            let d = sub(cs.positions[b], cs.positions[a]);
+            if d[0] > tol {
+                break;
+            }
+            if cs.vertex[a] != cs.vertex[b] && dot(d, d).sqrt() <= tol {
+                let mut regions = cs.regions[a].clone();
+                regions.extend_from_slice(&cs.regions[b]);
+                regions.sort_unstable();
+                regions.dedup();
+                return Some(Defect::Corner {
+                    vertex: cs.vertex[a],
+                    regions,
+                });
+            }
+        }
+    }
+    None
+}
+
+/// One region's outline loops as corner cycles; a border corner on the chord of its
+/// neighbours (to 1e-6 of the chord's length) adds nothing to the outline and would give a
+/// zero-area triangle, and it belongs to this polygon alone, so it is dropped (the mesh stays
+/// watertight).
+fn region_outlines(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    labels: &[u32],
+    cs: &Corners,
+    r: u32,
+    region_loops: &[Vec<u32>],
+) -> Result<Vec<Vec<u32>>, Defect> {
+    let mut outlines = Vec::new();
+    for lp in region_loops {
+        let mut ol: Vec<u32> = lp
+            .iter()
+            .filter_map(|&v| cs.at.get(&(v, r)))
+            .flatten()
+            .copied()
+            .collect();
+        ol.dedup();
+        if ol.len() > 1 && ol.first() == ol.last() {
+            ol.pop();
+        }
+        let mut i = 0;
+        while ol.len() > 3 && i < ol.len() {
+            let m = ol.len();
+            let (a, c, b) = (ol[(i + m - 1) % m], ol[i], ol[(i + 1) % m]);
+            let p = |x: u32| cs.positions[x as usize];
+            let chord = sub(p(b), p(a));
+            let off = cross(chord, sub(p(c), p(a)));
+            if cs.regions[c as usize].len() == 1 && dot(off, off).sqrt() <= 1e-6 * dot(chord, chord)
+            {
+                ol.remove(i);
+                i = i.saturating_sub(1);
+            } else {
+                i += 1;
+            }
+        }
+        if ol.len() < 3 {
+            // The regions across the loop's edges ring it.
+            let mut nb: Vec<u32> = Vec::new();
+            for (i, &v) in lp.iter().enumerate() {
+                let b = lp[(i + 1) % lp.len()];
+                nb.extend(
+                    faces_at(topo, v)
+                        .iter()
+                        .filter(|&&f| faces[f as usize].contains(&b) && labels[f as usize] != r)
+                        .map(|&f| labels[f as usize]),
+                );
+            }
+            nb.sort_unstable();
+            nb.dedup();
+            return Err(Defect::Loop {
+                region: r,
+                neighbors: nb,
+            });
+        }
+        outlines.push(ol);
+    }
+    if outlines.is_empty() {
+        // A closed surface in one region has no outline.
+        return Err(Defect::Loop {
+            region: r,
+            neighbors: Vec::new(),
+        });
+    }
+    Ok(outlines)
+}
+
+/// Checks that the outlines of region `r` bound a simple polygon with holes in its plane (the
+/// outer loop, of largest area, counter-clockwise; holes clockwise and inside it; no two
+/// edges crossing) and returns it with the holes bridged in, and its triangles.
+fn region_polygon(
+    cs: &Corners,
+    plane: &Plane,
+    r: u32,
+    outlines: &[Vec<u32>],
+) -> Result<(Vec<u32>, Vec<[u32; 3]>), Defect> {
+    let (u, w) = frame(plane);
+    let to2 = |c: u32| {
+        let q = cs.positions[c as usize];
+        [dot(q, u), dot(q, w)]
+    };
+    let p2: Vec<Vec<[f64; 2]>> = outlines
+        .iter()
+        .map(|l| l.iter().map(|&c| to2(c)).collect())
+        .collect();
+    let areas: Vec<f64> = p2.iter().map(|p| signed_area(p)).collect();
+    let outer = (0..outlines.len())
+        .max_by(|&a, &b| areas[a].abs().total_cmp(&areas[b].abs()))
+        .unwrap_or(0);
+    let bad = Defect::Outline {
+        region: r,
+        regions: Vec::new(),
+    };
+    if areas[outer] <= 0.0 {
+        return Err(bad);
+    }
+    for (i, a) in areas.iter().enumerate() {
+        if i != outer && (*a >= 0.0 || !inside(p2[i][0], &p2[outer])) {
+            return Err(bad);
+        }
+    }
+    let ids: Vec<(u32, u32)> = outlines
+        .iter()
+        .flat_map(|l| (0..l.len()).map(move |k| (l[k], l[(k + 1) % l.len()])))
+        .collect();
+    for i in 0..ids.len() {
+        for j in i + 1..ids.len() {
+            let (a, b) = (to2(ids[i].0), to2(ids[i].1));
+            if segments_meet(a, b, to2(ids[j].0), to2(ids[j].1)) {
+                let mut regions: Vec<u32> = [ids[i].0, ids[i].1, ids[j].0, ids[j].1]
+                    .iter()
+                    .flat_map(|&c| cs.regions[c as usize].iter().copied())
+                    .collect();
+                regions.sort_unstable();
+                regions.dedup();
+                return Err(Defect::Outline { region: r, regions });
+            }
+        }
+    }
+    let holes = (0..outlines.len())
+        .filter(|&i| i != outer)
+        .map(|i| outlines[i].clone())
+        .collect();
+    let poly = bridge_holes(&outlines[outer], holes, &to2);
+    let pts: Vec<[f64; 2]> = poly.iter().map(|&c| to2(c)).collect();
+    let mut tris = Vec::new();
+    for t in ear_clip(&pts) {
+        if orient(pts[t[0]], pts[t[1]], pts[t[2]]) <= 0.0 {
+            return Err(bad);
+        }
+        tris.push(t.map(|k| poly[k]));
+    }
+    Ok((poly, tris))
+}
+
+/// The polygon mesh of a partition with its planes, and its triangles (in the polygons'
+/// planes); corners index into one shared list.
+pub fn build(
+    topo: &Topology,
+    pos: &[V3],
+    faces: &[[u32; 3]],
+    labels: &[u32],
+    planes: &[Plane],
+) -> Result<(PolygonMesh, Vec<[u32; 3]>), Defect> {
+    // Corners closer than this are one point at the output's precision (the planarity
+    // tolerance, 1e-6 of the diagonal): at one junction they are merged, at two they are a
+    // defect (two corners on one point pinch the polygons between them).
+    let tol = 1e-6 * bbox_diagonal(pos);
+    let cs = corners(topo, pos, faces, labels, planes, tol)?;
+    if let Some(d) = coincident(&cs, tol) {
+        return Err(d);
+    }
+    let mut mesh = PolygonMesh {
+        positions: cs.positions.clone(),
+        ..Default::default()
+    };
+    let mut tris: Vec<[u32; 3]> = Vec::new();
+    let mut tri_region: Vec<u32> = Vec::new();
+    for (r, region_loops) in loops(topo, faces, labels, planes.len())
+        .into_iter()
+        .enumerate()
+    {
+        let r = r as u32;
+        let outlines = region_outlines(topo, faces, labels, &cs, r, &region_loops)?;
+        let (poly, t) = region_polygon(&cs, &planes[r as usize], r, &outlines)?;
+        mesh.holes += outlines.len() - 1;
+        tri_region.extend(std::iter::repeat_n(r, t.len()));
+        tris.extend(t);
+        mesh.polygons.push(poly);
+        mesh.region.push(r);
+    }
+    if let Some([a, b]) = first_crossing(&mesh.positions, &tris, &tri_region) {
+        return Err(Defect::Crossing { regions: [a, b] });
+    }
+    mesh.corners = cs.vertex;
+    Ok((mesh, tris))
+}
+
+/// A partition realised as a polygon mesh.
+pub struct Realised {
+    pub polygons: PolygonMesh,
+    /// The polygons' triangles (indices into `polygons.positions`), in their planes.
+    pub triangles: Vec<[u32; 3]>,
+    /// Region of each face, numbered `0..planes.len()`.
+    pub labels: Vec<u32>,
+    pub planes: Vec<Plane>,
+    /// The defects met on the way, each answered by a split or a merge.
+    pub defects: Vec<Defect>,
+    pub splits: usize,
+    pub merges: usize,
+}
+
+/// Regions sharing an edge, as sorted pairs.
+fn adjacent_pairs(topo: &Topology, labels: &[u32]) -> Vec<(u32, u32)> {
+    let mut p: Vec<(u32, u32)> = topo
+        .interior_edges
+        .iter()
+        .filter_map(|&e| {
+            let [f, g] = topo.edge_faces[e as usize];
+            let (a, b) = (labels[f as usize], labels[g as usize]);
+            (a != b).then_some((a.min(b), a.max(b)))
+        })
+        .collect();
+    p.sort_unstable();
+    p.dedup();
+    p
+}
+
+/// Each region's moments and fitted plane with its residual.
+struct Fits {
+    region: Vec<Moments>,
+    fit: Vec<(Plane, f64)>,
+}
+
+impl Fits {
+    fn new(face: &[Moments], labels: &[u32], n: usize) -> Fits {
+        let mut region = vec![Moments::default(); n];
+        for (f, &r) in labels.iter().enumerate() {
+            region[r as usize] = region[r as usize].add(&face[f]);
+        }
+        let fit = region.iter().map(fit_or_flat).collect();
+        Fits { region, fit }
+    }
+
+    fn planes(&self) -> Vec<Plane> {
+        self.fit.iter().map(|f| f.0).collect()
+    }
+
+    /// How much worse the merged region fits than the two apart.
+    fn merge_cost(&self, (a, b): (u32, u32)) -> f64 {
+        let merged = self.region[a as usize].add(&self.region[b as usize]);
+        fit_or_flat(&merged).1 - self.fit[a as usize].1 - self.fit[b as usize].1
+    }
+
+    /// The adjacent pair among `pairs` whose merge costs least.
+    fn cheapest(&self, pairs: impl Iterator<Item = (u32, u32)>) -> Option<(u32, u32)> {
+        pairs.min_by(|&x, &y| {
+            self.merge_cost(x)
+                .total_cmp(&self.merge_cost(y))
+                .then(x.cmp(&y))
+        })
+    }
+}
+
+fn fit_or_flat(m: &Moments) -> (Plane, f64) {
+    m.fit().unwrap_or((
+        Plane {
+            n: [0.0, 0.0, 1.0],
+            d: 0.0,
+        },
+        0.0,
+    ))
+}
+
+/// The region a defect asks to split: an outline that crosses itself its own region (a
+/// region that turns too much for one plane), otherwise the named region whose plane fits
+/// worst.
+fn split_target(defect: &Defect, named: &[u32], fits: &Fits, unsplittable: &[bool]) -> Option<u32> {
+    if let Defect::Outline { region, .. } = defect {
+        if !unsplittable[*region as usize] {
+            return Some(*region);
+        }
+    }
+    named
+        .iter()
+        .copied()
+        .filter(|&r| !unsplittable[r as usize])
+        .max_by(|&a, &b| fits.fit[a as usize].1.total_cmp(&fits.fit[b as usize].1))
+}
+
+/// Merges region `gone` into `keep` and renumbers the regions after `gone` down by one.
+fn merge(labels: &mut [u32], keep: u32, gone: u32) {
+    let keep = if keep > gone { keep - 1 } else { keep };
+    for l in labels.iter_mut() {
+        if *l == gone {
+            *l = keep;
+        } else if *l > gone {
+            *l -= 1;
+        }
+    }
+}
+
+/// The input surface: positions and faces, and the normals and areas splits follow.
+pub struct Surface<'a> {
+    pub topo: &'a Topology,
+    pub pos: &'a [V3],
+    pub faces: &'a [[u32; 3]],
+    pub normals: &'a [V3],
+    pub areas: &'a [f64],
+}
+
+fn hash_of(labels: &[u32]) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    labels.hash(&mut h);
+    h.finish()
+}
+
+/// The polygon mesh of the partition `labels` (regions `0..n`, each connected) with the
+/// least-squares plane of each region's input faces, using at most `k` regions.
+///
+/// Validity first. While the partition cannot be realised ([`Defect`]):
+/// - with fewer than `k` regions, the region the defect points at (an outline crossing
+///   itself: its region; otherwise the named region that fits worst) is split in two: a finer partition turns less per region, the usual cause (a curved part with too
+///   few planes to meet near the surface);
+/// - with `k`, the budget is taken where it costs least — the adjacent pair anywhere whose
+///   merged plane fits worst by the least is merged — for that split, unless this returns to
+///   a partition seen before (it would cycle);
+/// - otherwise, and from the first merge on, the two regions named by the defect (or one of
+///   them and a neighbour) whose merged plane fits worst by the least are merged.
+///
+/// Splits stop at the first merge and every merge removes a region, so this ends. Then the
+/// budget left is spent on the worst-fitting region while the split cuts its residual to a
+/// quarter (a curved region's; a flat noisy one is left alone) and the result stays valid (a split that
+/// breaks it is undone and that region left alone). `Err` when a defect involves no
+/// pair of adjacent regions left to merge.
+pub fn realise(
+    s: &Surface<'_>,
+    mut labels: Vec<u32>,
+    mut n: usize,
+    k: usize,
+) -> Result<Realised, Defect> {
+    let (topo, pos, faces) = (s.topo, s.pos, s.faces);
+    let face_moments: Vec<Moments> = faces
+        .iter()
+        .map(|f| {
+            let [a, b, c] = f.map(|i| pos[i as usize]);
+            Moments::triangle(a, b, c)
+        })
+        .collect();
+    let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
+    let (mut defects, mut splits, mut merges) = (Vec::new(), 0, 0);
+    let mut seen = HashSet::new();
+    let mut unsplittable: Vec<bool> = vec![false; n];
+    let split = |labels: &mut [u32], r: u32, n: usize| {
+        super::lloyd::split_region(topo, s.normals, s.areas, labels, r, n as u32, 10)
+    };
+    let (mut polygons, mut triangles) = loop {
+        let fits = Fits::new(&face_moments, &labels, n);
+        let defect = match build(topo, pos, faces, &labels, &fits.planes()) {
+            Ok(x) => break x,
+            Err(d) => d,
+        };
+        if trace {
+            eprintln!("approx outline: {n} regions: {defect}");
+        }
+        let named = defect.regions();
+        let fresh = seen.insert(hash_of(&labels));
+        if merges == 0 {
+            if let Some(r) = split_target(&defect, &named, &fits, &unsplittable) {
+                if n < k {
+                    if split(&mut labels, r, n) {
+                        n += 1;
+                        splits += 1;
+                        unsplittable.push(false);
+                    } else {
+                        unsplittable[r as usize] = true;
+                    }
+                    defects.push(defect);
+                    continue;
+                }
+                let pairs = adjacent_pairs(topo, &labels);
+                let elsewhere = pairs
+                    .into_iter()
+                    .filter(|(a, b)| !named.contains(a) && !named.contains(b));
+                if let (true, Some((keep, gone))) = (fresh, fits.cheapest(elsewhere)) {
+                    let mut trial = labels.clone();
+                    merge(&mut trial, keep, gone);
+                    let moved = if r > gone { r - 1 } else { r };
+                    if split(&mut trial, moved, n - 1) {
+                        labels = trial;
+                        unsplittable.remove(gone as usize);
+                        unsplittable.push(false);
+                        splits += 1;
+                    } else {
+                        unsplittable[r as usize] = true;
+                    }
+                    defects.push(defect);
+                    continue;
+                }
+            }
+        }
+        let pairs = adjacent_pairs(topo, &labels);
+        let both: Vec<(u32, u32)> = pairs
+            .iter()
+            .copied()
+            .filter(|(a, b)| named.contains(a) && named.contains(b))
+            .collect();
+        let pick = if both.is_empty() {
+            fits.cheapest(
+                pairs
+                    .into_iter()
+                    .filter(|(a, b)| named.contains(a) || named.contains(b)),
+            )
+        } else {
+            fits.cheapest(both.into_iter())
+        };
+        let Some((keep, gone)) = pick else {
+            return Err(defect);
+        };
+        merge(&mut labels, keep, gone);
+        unsplittable.remove(gone as usize);
+        n -= 1;
+        merges += 1;
+        defects.push(defect);
+    };
+    // The budget left, worst fit first, each split kept only when the result stays valid.
+    while n < k {
+        let fits = Fits::new(&face_moments, &labels, n);
+        let Some(worst) = (0..n)
+            .filter(|&r| !unsplittable[r] && fits.fit[r].1 > 0.0)
+            .max_by(|&a, &b| fits.fit[a].1.total_cmp(&fits.fit[b].1))
+        else {
+            break;
+        };
+        let mut trial = labels.clone();
+        if !split(&mut trial, worst as u32, n) {
+            unsplittable[worst] = true;
+            continue;
+        }
+        let fits_after = Fits::new(&face_moments, &trial, n + 1);
+        // A region that is curved loses most of its residual when halved (the sagitta of a
+        // half is a quarter, the residual per area a sixteenth); one that is flat but noisy
+        // loses little (each half's plane fits three more of its degrees of freedom). Splits
+        // that do not cut it to a quarter spend the budget on noise.
+        if fits_after.fit[worst].1 + fits_after.fit[n].1 > 0.25 * fits.fit[worst].1 {
+            unsplittable[worst] = true;
+            continue;
+        }
+        match build(topo, pos, faces, &trial, &fits_after.planes()) {
+            Ok((p, t)) => {
+                labels = trial;
+                n += 1;
+                splits += 1;
+                unsplittable.push(false);
+                polygons = p;
+                triangles = t;
+            }
+            Err(_) => unsplittable[worst] = true,
+        }
+    }
+    let planes = Fits::new(&face_moments, &labels, n).planes();
+    Ok(Realised {
+        polygons,
+        triangles,
+        labels,
+        planes,
+        defects,
+        splits,
+        merges,
+    })
+}
