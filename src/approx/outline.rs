@@ -24,7 +24,7 @@ use std::collections::{HashMap, HashSet};
 
 use super::geom::{add, cross, dot, normalize, scale, sub, Plane, V3};
 use super::intersect::first_crossing;
-use super::polygons::{bridge_holes, ear_clip, PolygonMesh};
+use super::polygons::{area2, basis, bridge_holes, ear_clip, orient, segments_cross, PolygonMesh};
 use crate::linalg::small::sym_eigen;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -476,38 +476,6 @@ fn loops(topo: &Topology, faces: &[[u32; 3]], labels: &[u32], n: usize) -> Vec<V
         .collect()
 }
 
-/// A 2D frame of plane `p`.
-fn frame(p: &Plane) -> (V3, V3) {
-    let h = if p.n[0].abs() < 0.9 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
-    let u = normalize(cross(p.n, h)).unwrap_or([1.0, 0.0, 0.0]);
-    (u, cross(p.n, u))
-}
-
-fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
-    (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-}
-
-fn signed_area(p: &[[f64; 2]]) -> f64 {
-    (0..p.len())
-        .map(|i| {
-            let (a, b) = (p[i], p[(i + 1) % p.len()]);
-            a[0] * b[1] - a[1] * b[0]
-        })
-        .sum::<f64>()
-        * 0.5
-}
-
-/// Whether segments `ab` and `cd` cross at a point interior to both.
-fn segments_meet(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
-    let (o1, o2) = (orient(a, b, c), orient(a, b, d));
-    let (o3, o4) = (orient(c, d, a), orient(c, d, b));
-    o1 * o2 < 0.0 && o3 * o4 < 0.0
-}
-
 /// Even–odd point-in-polygon test.
 fn inside(p: [f64; 2], poly: &[[f64; 2]]) -> bool {
     let mut w = false;
@@ -626,7 +594,7 @@ fn region_polygon(
     r: u32,
     outlines: &[Vec<u32>],
 ) -> Result<(Vec<u32>, Vec<[u32; 3]>), Defect> {
-    let (u, w) = frame(plane);
+    let (u, w) = basis(plane.n);
     let to2 = |c: u32| {
         let q = cs.positions[c as usize];
         [dot(q, u), dot(q, w)]
@@ -635,7 +603,7 @@ fn region_polygon(
         .iter()
         .map(|l| l.iter().map(|&c| to2(c)).collect())
         .collect();
-    let areas: Vec<f64> = p2.iter().map(|p| signed_area(p)).collect();
+    let areas: Vec<f64> = p2.iter().map(|p| area2(p)).collect();
     let outer = (0..outlines.len())
         .max_by(|&a, &b| areas[a].abs().total_cmp(&areas[b].abs()))
         .unwrap_or(0);
@@ -658,7 +626,7 @@ fn region_polygon(
     for i in 0..ids.len() {
         for j in i + 1..ids.len() {
             let (a, b) = (to2(ids[i].0), to2(ids[i].1));
-            if segments_meet(a, b, to2(ids[j].0), to2(ids[j].1)) {
+            if segments_cross(a, b, to2(ids[j].0), to2(ids[j].1)) {
                 let mut regions: Vec<u32> = [ids[i].0, ids[i].1, ids[j].0, ids[j].1]
                     .iter()
                     .flat_map(|&c| cs.regions[c as usize].iter().copied())

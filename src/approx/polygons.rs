@@ -31,7 +31,8 @@ pub struct PolygonMesh {
 /// A corner turns by more than this (radians) on a one-plane boundary (mesh border).
 const TURN: f64 = 2.0_f64 * std::f64::consts::PI / 180.0;
 
-fn basis(n: V3) -> (V3, V3) {
+/// An orthonormal frame of the plane with unit normal `n`.
+pub(super) fn basis(n: V3) -> (V3, V3) {
     let h = if n[0].abs() < 0.9 {
         [1.0, 0.0, 0.0]
     } else {
@@ -41,7 +42,8 @@ fn basis(n: V3) -> (V3, V3) {
     (u, cross(n, u))
 }
 
-fn area2(p: &[[f64; 2]]) -> f64 {
+/// Signed area of a 2D polygon (positive counter-clockwise).
+pub(super) fn area2(p: &[[f64; 2]]) -> f64 {
     let n = p.len();
     (0..n)
         .map(|i| {
@@ -52,11 +54,13 @@ fn area2(p: &[[f64; 2]]) -> f64 {
         * 0.5
 }
 
-fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+/// Twice the signed area of triangle `a b c`.
+pub(super) fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
     (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
 }
 
-fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
+/// Whether segments `ab` and `cd` cross at a point interior to both.
+pub(super) fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
     let (o1, o2) = (orient(a, b, c), orient(a, b, d));
     let (o3, o4) = (orient(c, d, a), orient(c, d, b));
     o1 * o2 < 0.0 && o3 * o4 < 0.0
