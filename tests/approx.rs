@@ -709,3 +709,22 @@ fn outline_splits_an_unrealisable_partition_into_the_cube_sides() {
         assert!(p.n[axis].abs() > 0.999 && off < 0.02, "{p:?}");
     }
 }
+
+/// A region is connected, so two separate closed cubes need at least eight polygons (a
+/// tetrahedron each): K = 7 is refused up front as bad input, K = 12 gives both cubes' sides.
+#[test]
+fn outline_refuses_fewer_regions_than_the_components_need() {
+    let a = noisy_cube(4, 0.01, 3);
+    let mut m = a.clone();
+    let nv = a.positions.len() as u32;
+    m.positions
+        .extend(a.positions.iter().map(|p| [p[0] + 3.0, p[1], p[2]]));
+    m.faces.extend(a.faces.iter().map(|f| f.map(|v| v + nv)));
+    let t = topo(&m);
+    let err = approximate(&m, &t, &ApproxOptions::new(7), &mut |_| {}).unwrap_err();
+    assert_eq!(err.exit_code(), 2, "{err}");
+    assert!(err.to_string().contains("2 closed components"), "{err}");
+    let out = approximate(&m, &t, &ApproxOptions::new(12), &mut |_| {}).unwrap();
+    assert_eq!(out.report.k_obtained, 12);
+    assert_watertight(&out.polygons.polygons);
+}

@@ -494,7 +494,10 @@ fn best_run(
         }
     }
     let Some(mut best) = best else {
-        let why = unrealised.map_or_else(String::new, |e| e.to_string());
+        let why = match unrealised {
+            Some(ApproxError::Unrealisable(m)) => m,
+            _ => String::new(),
+        };
         return Err(ApproxError::Unrealisable(format!(
             "no run of seeds {}..={} gave a valid polygon mesh with at most K = {} regions (the \
              last: {why}); nothing was written (a larger K, or more --restarts, may)",
@@ -517,6 +520,18 @@ fn run_once(
 ) -> Result<ApproxOutput, ApproxError> {
     if opts.k == 0 {
         return Err(ApproxError::BadInput("K must be at least 1".into()));
+    }
+    if opts.construction == Construction::Outline {
+        let (closed, open) = outline::components(topo);
+        let least = 4 * closed + open;
+        if opts.k < least {
+            return Err(ApproxError::BadInput(format!(
+                "K = {} is below the {least} polygons this mesh needs at least: a region cannot \
+                 span two connected components, and each of its {closed} closed components needs \
+                 four (a tetrahedron), each of its {open} open ones one",
+                opts.k
+            )));
+        }
     }
     let (n0, a0) = face_normals_areas(&mesh.positions, &mesh.faces);
     if let Some(f) = a0.iter().position(|&a| a <= 0.0 || !a.is_finite()) {

@@ -970,3 +970,16 @@ pub fn realise(
         merges,
     })
 }
+
+/// Connected components of the mesh without and with a border: a polygon mesh of it needs at
+/// least four polygons per closed one (a tetrahedron) and one per open one, since a region is
+/// connected.
+pub fn components(topo: &Topology) -> (usize, usize) {
+    let mut open = vec![false; topo.components];
+    for &e in &topo.boundary_edges {
+        let f = topo.edge_faces[e as usize][0];
+        open[topo.component_of_face[f as usize] as usize] = true;
+    }
+    let n_open = open.iter().filter(|&&o| o).count();
+    (topo.components - n_open, n_open)
+}
