@@ -873,25 +873,15 @@ fn run_once(
 
     // Errors and checks.
     let vc = cluster::vertex_clusters(topo, &face_cluster);
-    let (mut sum, mut cnt, mut maxd, mut maxp) = (0.0, 0usize, 0.0f64, 0.0f64);
+    let (mean, maxd) = input_distances(&mesh.positions, &vc, &pl.planes);
+    let mut maxp = 0.0f64;
     for (v, cs) in vc.iter().enumerate() {
-        let ds: Vec<f64> = cs
-            .iter()
-            .filter_map(|&c| pl.planes[c as usize])
-            .map(|p| p.signed_distance(mesh.positions[v]).abs())
-            .collect();
-        if !ds.is_empty() {
-            sum += ds.iter().sum::<f64>() / ds.len() as f64;
-            cnt += 1;
-            maxd = ds.iter().copied().fold(maxd, f64::max);
-        }
         for &c in cs {
             if let Some(p) = pl.planes[c as usize] {
                 maxp = maxp.max(p.signed_distance(pl.positions[v]).abs());
             }
         }
     }
-    let mean = sum / cnt.max(1) as f64;
     let (n_out, a_out) = face_normals_areas(&pl.positions, &mesh.faces);
     let mut flipped = 0;
     let mut flipped_in = 0;
@@ -986,6 +976,25 @@ fn run_once(
     })
 }
 
+/// The headline error: the mean over input vertices of their distance to their regions'
+/// planes (a vertex on several regions counts the mean over them), and the largest.
+fn input_distances(pos: &[V3], regions_at: &[Vec<u32>], planes: &[Option<Plane>]) -> (f64, f64) {
+    let (mut sum, mut cnt, mut maxd) = (0.0, 0usize, 0.0f64);
+    for (v, cs) in regions_at.iter().enumerate() {
+        let ds: Vec<f64> = cs
+            .iter()
+            .filter_map(|&c| planes[c as usize])
+            .map(|p| p.signed_distance(pos[v]).abs())
+            .collect();
+        if !ds.is_empty() {
+            sum += ds.iter().sum::<f64>() / ds.len() as f64;
+            cnt += 1;
+            maxd = ds.iter().copied().fold(maxd, f64::max);
+        }
+    }
+    (sum / cnt.max(1) as f64, maxd)
+}
+
 /// The partition realised by [`outline::realise`]: polygons whose corners are where the
 /// planes meet, merged where it cannot be realised.
 #[allow(clippy::too_many_arguments)]
@@ -1008,23 +1017,7 @@ fn outline_run(
     times.total = t_all.elapsed().as_secs_f64();
     let planes: Vec<Option<Plane>> = r.planes.iter().map(|&p| Some(p)).collect();
     let vc = cluster::vertex_clusters(topo, &r.labels);
-    let (mut sum, mut cnt, mut maxd) = (0.0, 0usize, 0.0f64);
-    for (v, cs) in vc.iter().enumerate() {
-        let ds: Vec<f64> = cs
-            .iter()
-            .map(|&c| {
-                r.planes[c as usize]
-                    .signed_distance(mesh.positions[v])
-                    .abs()
-            })
-            .collect();
-        if !ds.is_empty() {
-            sum += ds.iter().sum::<f64>() / ds.len() as f64;
-            cnt += 1;
-            maxd = ds.iter().copied().fold(maxd, f64::max);
-        }
-    }
-    let mean = sum / cnt.max(1) as f64;
+    let (mean, maxd) = input_distances(&mesh.positions, &vc, &planes);
     let mut maxp = 0.0f64;
     for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
         for &c in poly {

@@ -24,7 +24,9 @@ use std::collections::{HashMap, HashSet};
 
 use super::geom::{add, cross, dot, normalize, scale, sub, Plane, V3};
 use super::intersect::first_crossing;
-use super::polygons::{area2, basis, bridge_holes, ear_clip, orient, segments_cross, PolygonMesh};
+use super::polygons::{
+    area2, basis, bridge_holes, ear_clip, orient, region_loops, segments_cross, PolygonMesh,
+};
 use crate::linalg::small::sym_eigen;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -436,46 +438,6 @@ fn corners(
     Ok(out)
 }
 
-/// Each region's boundary loops as input-vertex cycles, in face direction (counter-clockwise
-/// seen along the normal for the outer loop, clockwise for holes).
-fn loops(topo: &Topology, faces: &[[u32; 3]], labels: &[u32], n: usize) -> Vec<Vec<Vec<u32>>> {
-    let mut next: Vec<HashMap<u32, Vec<u32>>> = vec![HashMap::new(); n];
-    for (f, face) in faces.iter().enumerate() {
-        for k in 0..3 {
-            let [g0, g1] = topo.edge_faces[topo.face_edges[f][k] as usize];
-            let g = if g0 as usize == f { g1 } else { g0 };
-            if g == NO_FACE || labels[g as usize] != labels[f] {
-                next[labels[f] as usize]
-                    .entry(face[k])
-                    .or_default()
-                    .push(face[(k + 1) % 3]);
-            }
-        }
-    }
-    next.into_iter()
-        .map(|mut nx| {
-            let mut starts: Vec<u32> = nx.keys().copied().collect();
-            starts.sort_unstable();
-            let mut out = Vec::new();
-            for s in starts {
-                while nx.get(&s).is_some_and(|v| !v.is_empty()) {
-                    let mut lp = vec![s];
-                    let mut cur = s;
-                    while let Some(b) = nx.get_mut(&cur).and_then(|v| v.pop()) {
-                        if b == s {
-                            break;
-                        }
-                        lp.push(b);
-                        cur = b;
-                    }
-                    out.push(lp);
-                }
-            }
-            out
-        })
-        .collect()
-}
-
 /// Even–odd point-in-polygon test.
 fn inside(p: [f64; 2], poly: &[[f64; 2]]) -> bool {
     let mut w = false;
@@ -676,7 +638,7 @@ pub fn build(
     };
     let mut tris: Vec<[u32; 3]> = Vec::new();
     let mut tri_region: Vec<u32> = Vec::new();
-    for (r, region_loops) in loops(topo, faces, labels, planes.len())
+    for (r, region_loops) in region_loops(topo, faces, labels, planes.len())
         .into_iter()
         .enumerate()
     {

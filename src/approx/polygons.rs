@@ -66,8 +66,14 @@ pub(super) fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2])
     o1 * o2 < 0.0 && o3 * o4 < 0.0
 }
 
-/// Region loops as vertex cycles (each in face direction).
-fn region_loops(topo: &Topology, faces: &[[u32; 3]], fc: &[u32], n: usize) -> Vec<Vec<Vec<u32>>> {
+/// Region loops as vertex cycles (each in face direction: counter-clockwise seen along the
+/// normal for the outer loop, clockwise for holes).
+pub(super) fn region_loops(
+    topo: &Topology,
+    faces: &[[u32; 3]],
+    fc: &[u32],
+    n: usize,
+) -> Vec<Vec<Vec<u32>>> {
     let mut out: Vec<HashMap<u32, Vec<u32>>> = vec![HashMap::new(); n];
     for (f, face) in faces.iter().enumerate() {
         for k in 0..3 {
