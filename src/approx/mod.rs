@@ -97,11 +97,12 @@ impl ApproxError {
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
 pub enum Construction {
-    /// The input's vertices pressed onto the planes (boundary L0 with planarity constraints,
-    /// then the fold repairs); OUT.obj keeps the input's connectivity.
+    /// The previous construction, kept for comparison: the input's vertices pressed onto the
+    /// planes (boundary L0 with planarity constraints, then the fold repairs); OUT.obj keeps
+    /// the input's connectivity.
     Press,
-    /// Corners where the planes meet, the partition changed where that fails
-    /// ([`outline`]); OUT.obj is the triangulation of the polygons. Experimental (issue 23).
+    /// The default: corners where the planes meet, the partition split or merged where they
+    /// cannot realise it ([`outline`]); OUT.obj is the triangulation of the polygons.
     Outline,
 }
 
@@ -414,16 +415,14 @@ impl ApproxOutput {
 }
 
 /// Runs the whole pipeline on a validated mesh (see [`crate::mesh::load`]), restarting with
-/// other seeds while folds are left (see `ApproxOptions::restarts`). `progress` is told when
-/// each stage starts.
+/// other seeds while no run gave a valid polygon mesh or folds are left (see
+/// `ApproxOptions::restarts`). `progress` is told when each stage starts.
 ///
-/// Why restarts: which faces seed the regions decides the partition, and whether a partition
-/// can be made planar without folds is a property of the partition (its plane arrangement),
-/// which later stages only repair locally; another seed gives an independent partition, so a
-/// fold that survives the repairs is often absent from the next run (BENCHMARKS.md, planar
-/// approximation rounds, counts bad faces per seed).
-/// Each restart costs a whole run; runs that fold only a little are cheap (the expensive
-/// repairs are skipped where hundreds of faces fold).
+/// Why restarts: which faces seed the regions decides the partition, and whether its planes
+/// realise it as a polygon mesh (or, pressed, without folds) is a property of the partition;
+/// another seed gives an independent partition, so a fault that survives one run's splits and
+/// merges (or repairs) is often absent from the next (BENCHMARKS.md, planar approximation
+/// rounds). Each restart costs a whole run.
 pub fn approximate(
     mesh: &TriMesh,
     topo: &Topology,
