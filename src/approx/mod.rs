@@ -600,6 +600,16 @@ fn run_once(
     let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut face_cluster);
     let n_clusters = renumber(&mut face_cluster);
     times.cluster = t.elapsed().as_secs_f64();
+    let partition = PartitionFacts {
+        grown: cl.grown,
+        merged: cl.count,
+        final_angle_deg: cl.final_angle_deg,
+        lloyd_rounds,
+        faces_reassigned: reassigned + smoothed,
+        corner_merges: corner_merges + collapse_merges,
+        crease_edges: sm.crease_edges,
+        alm_rounds_normals: sm.rounds,
+    };
     if opts.construction == Construction::Outline {
         progress(Stage::Polygons);
         let surface = outline::Surface {
@@ -615,7 +625,7 @@ fn run_once(
             opts,
             face_cluster,
             n_clusters,
-            &cl,
+            &partition,
             times,
             t_all,
             diag,
@@ -915,28 +925,11 @@ fn run_once(
         ));
     }
     let report = ApproxReport {
-        faces: mesh.faces.len(),
-        seed_used: opts.seed,
-        runs: 1,
-        seconds_all_runs: times.total,
-        vertices: mesh.positions.len(),
-        k_requested: opts.k,
         k_obtained: n_clusters,
-        regions_grown: cl.grown,
-        regions_merged: cl.count,
-        final_angle_deg: cl.final_angle_deg,
-        bbox_diagonal: diag,
-        mean_input_distance: mean,
-        mean_input_distance_rel: rel(mean),
-        max_input_distance: maxd,
-        max_input_distance_rel: rel(maxd),
-        max_planarity_deviation: maxp,
-        max_planarity_deviation_rel: rel(maxp),
         flipped_faces: flipped,
         flipped_vs_input: flipped_in,
         degenerate_faces: degenerate,
         polygons_cross: polys.crossing().is_some(),
-        faces_reassigned: reassigned + smoothed,
         fold_moves: faces_moved,
         slides_kept,
         regions_dissolved: dissolved,
@@ -946,24 +939,26 @@ fn run_once(
         chains_respaced: ut.chains_respaced,
         fold_repairs: ut.patches_embedded,
         regions_untangled: ut.regions_embedded,
-        lloyd_rounds,
         regions_split,
         split_passes,
         merge_passes,
-        corner_merges: corner_merges + collapse_merges,
         vertices_on_4plus_planes: pl.vertices_on_4plus,
         unresolved_vertices_4plus: pl.unresolved_4plus,
         unresolved_vertices_other: pl.unresolved_other,
-        crease_edges: sm.crease_edges,
-        alm_rounds_normals: sm.rounds,
         alm_rounds_boundary: pl.alm_rounds,
         projection_rounds: pl.projection_rounds,
         polygons: polys.polygons.len(),
         polygon_holes: polys.holes,
         corners: polys.corners.len(),
-        seconds: times,
-        notes,
-        options: opts.clone(),
+        ..base_report(
+            mesh,
+            opts,
+            &partition,
+            diag,
+            (mean, maxd, maxp),
+            times,
+            notes,
+        )
     };
     Ok(ApproxOutput {
         positions: pl.positions,
@@ -1003,61 +998,36 @@ fn outline_run(
     opts: &ApproxOptions,
     face_cluster: Vec<u32>,
     n_clusters: usize,
-    cl: &cluster::Clustering,
+    partition: &PartitionFacts,
     mut times: StageTimes,
     t_all: Instant,
     diag: f64,
 ) -> Result<ApproxOutput, ApproxError> {
-    let topo = surface.topo;
     let t = Instant::now();
     let r = outline::realise(surface, face_cluster, n_clusters, opts.k)
         .map_err(|d| ApproxError::Unrealisable(format!("seed {}: {d}", opts.seed)))?;
     times.polygons = t.elapsed().as_secs_f64();
     times.total = t_all.elapsed().as_secs_f64();
     let planes: Vec<Option<Plane>> = r.planes.iter().map(|&p| Some(p)).collect();
-    let vc = cluster::vertex_clusters(topo, &r.labels);
+    let vc = cluster::vertex_clusters(surface.topo, &r.labels);
     let (mean, maxd) = input_distances(&mesh.positions, &vc, &planes);
     let mut maxp = 0.0f64;
     for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
         for &c in poly {
-            maxp = maxp.max(
-                r.planes[reg as usize]
-                    .signed_distance(r.polygons.positions[c as usize])
-                    .abs(),
-            );
+            let p = r.polygons.positions[c as usize];
+            maxp = maxp.max(r.planes[reg as usize].signed_distance(p).abs());
         }
     }
+    // The independent count of what the construction rules out.
     let (n_out, a_out) = face_normals_areas(&r.polygons.positions, &r.triangles);
-    let mut tri_region = Vec::new();
-    for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
-        let _ = poly;
-        tri_region.push(reg);
-    }
-    let mut flipped = 0;
-    let mut degenerate = 0;
-    // Triangles are emitted polygon by polygon; recover each one's region by its corners.
-    let corner_regions = {
-        let mut m: Vec<Vec<u32>> = vec![Vec::new(); r.polygons.positions.len()];
-        for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
-            for &c in poly {
-                m[c as usize].push(reg);
-            }
-        }
-        m
-    };
-    for (f, t) in r.triangles.iter().enumerate() {
+    let (mut flipped, mut degenerate) = (0, 0);
+    for (f, &reg) in r.triangle_region.iter().enumerate() {
         if a_out[f] <= 1e-12 * diag * diag {
             degenerate += 1;
-            continue;
-        }
-        let common = corner_regions[t[0] as usize].iter().find(|x| {
-            corner_regions[t[1] as usize].contains(x) && corner_regions[t[2] as usize].contains(x)
-        });
-        if let Some(&reg) = common {
-            flipped += usize::from(dot(n_out[f], r.planes[reg as usize].n) <= 0.0);
+        } else if dot(n_out[f], r.planes[reg as usize].n) <= 0.0 {
+            flipped += 1;
         }
     }
-    let rel = |x: f64| if diag > 0.0 { x / diag } else { 0.0 };
     let mut notes = Vec::new();
     if r.merges > 0 {
         notes.push(format!(
@@ -1069,18 +1039,71 @@ fn outline_run(
             r.defects.len()
         ));
     }
-    let k = r.planes.len();
-    let mut report = ApproxReport {
+    let report = ApproxReport {
+        k_obtained: r.planes.len(),
+        flipped_faces: flipped,
+        degenerate_faces: degenerate,
+        regions_split: r.splits,
+        merge_passes: r.merges,
+        polygons: r.polygons.polygons.len(),
+        polygon_holes: r.polygons.holes,
+        corners: r.polygons.positions.len(),
+        ..base_report(
+            mesh,
+            opts,
+            partition,
+            diag,
+            (mean, maxd, maxp),
+            times,
+            notes,
+        )
+    };
+    Ok(ApproxOutput {
+        positions: r.polygons.positions.clone(),
+        faces: r.triangles,
+        face_cluster: r.labels,
+        planes,
+        polygons: r.polygons,
+        report,
+    })
+}
+
+/// What the partition stage did, for the report.
+struct PartitionFacts {
+    grown: usize,
+    merged: usize,
+    final_angle_deg: f64,
+    lloyd_rounds: usize,
+    faces_reassigned: usize,
+    corner_merges: usize,
+    crease_edges: usize,
+    alm_rounds_normals: usize,
+}
+
+/// The report's fields every construction fills the same way (the input, the partition, the
+/// error `(mean, max)` of the input to the planes and the output's planarity); the
+/// construction's own counts are zero, for the caller to set.
+fn base_report(
+    mesh: &TriMesh,
+    opts: &ApproxOptions,
+    p: &PartitionFacts,
+    diag: f64,
+    (mean, maxd, maxp): (f64, f64, f64),
+    seconds: StageTimes,
+    notes: Vec<String>,
+) -> ApproxReport {
+    let rel = |x: f64| if diag > 0.0 { x / diag } else { 0.0 };
+    ApproxReport {
         faces: mesh.faces.len(),
         seed_used: opts.seed,
         runs: 1,
-        seconds_all_runs: times.total,
+        seconds_all_runs: seconds.total,
         vertices: mesh.positions.len(),
         k_requested: opts.k,
-        k_obtained: k,
-        regions_grown: cl.grown,
-        regions_merged: cl.count,
-        final_angle_deg: cl.final_angle_deg,
+        k_obtained: 0,
+        regions_grown: p.grown,
+        regions_merged: p.merged,
+        final_angle_deg: p.final_angle_deg,
         bbox_diagonal: diag,
         mean_input_distance: mean,
         mean_input_distance_rel: rel(mean),
@@ -1088,11 +1111,11 @@ fn outline_run(
         max_input_distance_rel: rel(maxd),
         max_planarity_deviation: maxp,
         max_planarity_deviation_rel: rel(maxp),
-        flipped_faces: flipped,
+        flipped_faces: 0,
         flipped_vs_input: 0,
-        degenerate_faces: degenerate,
+        degenerate_faces: 0,
         polygons_cross: false,
-        faces_reassigned: 0,
+        faces_reassigned: p.faces_reassigned,
         fold_moves: 0,
         slides_kept: 0,
         regions_dissolved: 0,
@@ -1102,34 +1125,25 @@ fn outline_run(
         chains_respaced: 0,
         fold_repairs: 0,
         regions_untangled: 0,
-        lloyd_rounds: 0,
-        regions_split: r.splits,
+        lloyd_rounds: p.lloyd_rounds,
+        regions_split: 0,
         split_passes: 0,
-        merge_passes: r.merges,
-        corner_merges: 0,
+        merge_passes: 0,
+        corner_merges: p.corner_merges,
         vertices_on_4plus_planes: 0,
         unresolved_vertices_4plus: 0,
         unresolved_vertices_other: 0,
-        crease_edges: 0,
-        alm_rounds_normals: 0,
+        crease_edges: p.crease_edges,
+        alm_rounds_normals: p.alm_rounds_normals,
         alm_rounds_boundary: 0,
         projection_rounds: 0,
-        polygons: r.polygons.polygons.len(),
-        polygon_holes: r.polygons.holes,
-        corners: r.polygons.positions.len(),
-        seconds: times,
+        polygons: 0,
+        polygon_holes: 0,
+        corners: 0,
+        seconds,
         notes,
         options: opts.clone(),
-    };
-    report.runs = 1;
-    Ok(ApproxOutput {
-        positions: r.polygons.positions.clone(),
-        faces: r.triangles.clone(),
-        face_cluster: r.labels,
-        planes,
-        polygons: r.polygons,
-        report,
-    })
+    }
 }
 
 /// Most bad faces for which a pass runs its fold moves (and the kept pass its slides). Above,

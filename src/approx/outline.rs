@@ -615,6 +615,9 @@ fn region_polygon(
     Ok((poly, tris))
 }
 
+/// A polygon mesh, its triangles and the region of each triangle.
+type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
+
 /// The polygon mesh of a partition with its planes, and its triangles (in the polygons'
 /// planes); corners index into one shared list.
 pub fn build(
@@ -623,7 +626,7 @@ pub fn build(
     faces: &[[u32; 3]],
     labels: &[u32],
     planes: &[Plane],
-) -> Result<(PolygonMesh, Vec<[u32; 3]>), Defect> {
+) -> Result<Built, Defect> {
     // Corners closer than this are one point at the output's precision (the planarity
     // tolerance, 1e-6 of the diagonal): at one junction they are merged, at two they are a
     // defect (two corners on one point pinch the polygons between them).
@@ -655,14 +658,16 @@ pub fn build(
         return Err(Defect::Crossing { regions: [a, b] });
     }
     mesh.corners = cs.vertex;
-    Ok((mesh, tris))
+    Ok((mesh, tris, tri_region))
 }
 
 /// A partition realised as a polygon mesh.
 pub struct Realised {
     pub polygons: PolygonMesh,
-    /// The polygons' triangles (indices into `polygons.positions`), in their planes.
+    /// The polygons' triangles (indices into `polygons.positions`), in their planes, and the
+    /// region of each.
     pub triangles: Vec<[u32; 3]>,
+    pub triangle_region: Vec<u32>,
     /// Region of each face, numbered `0..planes.len()`.
     pub labels: Vec<u32>,
     pub planes: Vec<Plane>,
@@ -817,7 +822,7 @@ pub fn realise(
     let split = |labels: &mut [u32], r: u32, n: usize| {
         super::lloyd::split_region(topo, s.normals, s.areas, labels, r, n as u32, 10)
     };
-    let (mut polygons, mut triangles) = loop {
+    let (mut polygons, mut triangles, mut triangle_region) = loop {
         let fits = Fits::new(&face_moments, &labels, n);
         let defect = match build(topo, pos, faces, &labels, &fits.planes()) {
             Ok(x) => break x,
@@ -910,13 +915,14 @@ pub fn realise(
             continue;
         }
         match build(topo, pos, faces, &trial, &fits_after.planes()) {
-            Ok((p, t)) => {
+            Ok((p, t, tr)) => {
                 labels = trial;
                 n += 1;
                 splits += 1;
                 unsplittable.push(false);
                 polygons = p;
                 triangles = t;
+                triangle_region = tr;
             }
             Err(_) => unsplittable[worst] = true,
         }
@@ -925,6 +931,7 @@ pub fn realise(
     Ok(Realised {
         polygons,
         triangles,
+        triangle_region,
         labels,
         planes,
         defects,
