@@ -10,7 +10,7 @@
 use sprs::{CsMat, TriMat};
 
 use super::geom::{dot, mean_edge_length, normalize, V3};
-use super::sparse::{solve_spd, spmv};
+use super::sparse::{spmv, SpdSolver};
 use crate::linalg::SolveError;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -108,6 +108,7 @@ pub fn smooth_normals(
         let w = weights[r];
         [0, 1, 2].map(|k| w * (n[k][f] - n[k][g]))
     };
+    let mut spd = SpdSolver::default();
     while beta <= opts.beta_max && ne > 0 {
         rounds += 1;
         // p-step: hard threshold of w = DN + λ/β.
@@ -131,7 +132,7 @@ pub fn smooth_normals(
                 rhs0[k].iter().zip(dq.iter()).map(|(a, b)| a + b).collect()
             })
             .collect();
-        solve_spd(&a, &b, &mut n, 1e-8)?;
+        spd.solve(&a, &b, &mut n, 1e-8)?;
         // Multipliers.
         for r in 0..ne {
             let g = grad(&n, r);

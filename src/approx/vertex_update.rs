@@ -14,7 +14,7 @@
 use sprs::{CsMat, TriMat};
 
 use super::geom::{add, face_normals_areas, mean_edge_length, rotate_min, scale, sub, V3};
-use super::sparse::solve_spd;
+use super::sparse::SpdSolver;
 use crate::linalg::SolveError;
 use crate::mesh::{Topology, TriMesh};
 
@@ -80,6 +80,7 @@ pub fn update_vertices(
     let n = mesh.positions.len();
     let mut x = mesh.positions.clone();
     let lbar = mean_edge_length(&x, &topo.edges);
+    let mut spd = SpdSolver::default();
     for _ in 0..opts.rounds {
         let (normals, areas) = face_normals_areas(&x, &mesh.faces);
         let abar = areas.iter().sum::<f64>() / areas.len().max(1) as f64;
@@ -113,7 +114,7 @@ pub fn update_vertices(
         let a: CsMat<f64> = sys.t.to_csr();
         let b: Vec<Vec<f64>> = sys.rhs.to_vec();
         let mut cols: Vec<Vec<f64>> = (0..3).map(|k| x.iter().map(|p| p[k]).collect()).collect();
-        solve_spd(&a, &b, &mut cols, 1e-9)?;
+        spd.solve(&a, &b, &mut cols, 1e-9)?;
         for (i, p) in x.iter_mut().enumerate() {
             *p = [cols[0][i], cols[1][i], cols[2][i]];
         }
