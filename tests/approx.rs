@@ -613,6 +613,7 @@ fn restarts_keep_the_best_run_and_stop_when_clean() {
     };
     let mut opts = new(2);
     opts.restarts = 0;
+    opts.tries = 1;
     let first = approximate(&m, &t, &opts, &mut |_| {}).unwrap().report;
     assert!(bad(&first) > 0, "the first run must fold for this test");
     assert_eq!((first.runs, first.seed_used), (1, 1));
@@ -626,14 +627,43 @@ fn restarts_keep_the_best_run_and_stop_when_clean() {
     // The returned run is the one of its seed.
     let mut again = new(2);
     again.restarts = 0;
+    again.tries = 1;
     again.seed = best.seed_used;
     let one = approximate(&m, &t, &again, &mut |_| {}).unwrap().report;
     assert_eq!(bad(&one), bad(&best));
     // Clean on the first run: no restart.
     let mut clean = new(8);
     clean.restart_min_bad = 1;
+    clean.tries = 1;
     let r = approximate(&m, &t, &clean, &mut |_| {}).unwrap().report;
     assert_eq!((bad(&r), r.runs), (0, 1));
+}
+
+/// Tries: the partitions of seeds `seed .. seed + tries − 1` are all realised and the valid
+/// one nearest the input (least mean distance) is kept; it is the run of its own seed.
+#[test]
+fn tries_keep_the_valid_partition_nearest_the_input() {
+    let m = tube(24, 4);
+    let t = topo(&m);
+    let run = |seed: u64, tries: usize| {
+        let mut o = ApproxOptions::new(8);
+        o.seed = seed;
+        o.tries = tries;
+        o.restarts = 0;
+        approximate(&m, &t, &o, &mut |_| {}).map(|x| x.report)
+    };
+    let singles: Vec<_> = (1..=3).map(|s| run(s, 1).ok()).collect();
+    let best = run(1, 3).unwrap();
+    assert_eq!(best.runs, 3);
+    let least = singles
+        .iter()
+        .flatten()
+        .map(|r| r.mean_input_distance)
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(best.mean_input_distance, least);
+    let own = singles[(best.seed_used - 1) as usize].as_ref().unwrap();
+    assert_eq!(own.mean_input_distance, best.mean_input_distance);
+    assert_eq!(own.k_obtained, best.k_obtained);
 }
 
 /// Every polygon edge is used once in each direction (by two polygons, or twice by one

@@ -18,7 +18,6 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-use super::cluster::region_normal_sums;
 use super::geom::{add, normalize, scale, sub, V3};
 use crate::mesh::{Topology, NO_FACE};
 
@@ -57,7 +56,9 @@ pub fn relax(
 }
 
 /// [`relax`] where only faces with `movable[f]` may change region; the regions holding them
-/// compete for them and the rest of the partition is left as it is.
+/// compete for them and the rest of the partition is left as it is. Each region's proxy is
+/// taken from its movable faces (all of them for [`relax`]; for a split, the two halves are
+/// all movable), so a round costs the movable faces, not the mesh.
 pub fn relax_subset(
     topo: &Topology,
     normals: &[V3],
@@ -66,26 +67,37 @@ pub fn relax_subset(
     movable: &[bool],
     rounds: usize,
 ) -> usize {
-    let nf = labels.len();
-    let count = labels.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+    let members: Vec<usize> = (0..labels.len()).filter(|&f| movable[f]).collect();
+    let count = members
+        .iter()
+        .map(|&f| labels[f] as usize + 1)
+        .max()
+        .unwrap_or(0);
+    // Faces not movable keep their label; movable ones are cleared each round.
+    let mut next: Vec<u32> = labels.to_vec();
     let mut changed_rounds = 0;
     for _ in 0..rounds {
-        let sums = region_normal_sums(labels, normals, areas);
+        let mut sums = vec![[0.0; 3]; count];
+        for &f in &members {
+            let c = labels[f] as usize;
+            sums[c] = add(sums[c], scale(normals[f], areas[f]));
+        }
         let proxy: Vec<V3> = sums
             .iter()
             .map(|&s| normalize(s).unwrap_or([0.0; 3]))
             .collect();
         let mut seed: Vec<Option<(f64, usize)>> = vec![None; count];
-        for (f, &c) in labels.iter().enumerate().filter(|&(f, _)| movable[f]) {
+        for &f in &members {
+            let c = labels[f];
             let e = err(normals, areas, f, proxy[c as usize]);
             let s = &mut seed[c as usize];
             if s.is_none_or(|(be, _)| e < be) {
                 *s = Some((e, f));
             }
         }
-        let mut next: Vec<u32> = (0..nf)
-            .map(|f| if movable[f] { u32::MAX } else { labels[f] })
-            .collect();
+        for &f in &members {
+            next[f] = u32::MAX;
+        }
         // Keys are non-negative floats, whose bit patterns order like the values.
         let mut heap: BinaryHeap<Reverse<(u64, usize, u32)>> = BinaryHeap::new();
         for (c, s) in seed.iter().enumerate() {
@@ -113,9 +125,11 @@ pub fn relax_subset(
         // seed. Faces of a component without a seed (not possible for a valid partition) keep
         // their label.
         let mut changed = false;
-        for (l, n) in labels.iter_mut().zip(&next) {
-            if *n != u32::MAX && *n != *l {
-                *l = *n;
+        for &f in &members {
+            if next[f] == u32::MAX {
+                next[f] = labels[f];
+            } else if next[f] != labels[f] {
+                labels[f] = next[f];
                 changed = true;
             }
         }

@@ -32,6 +32,10 @@ pub struct ApproxArgs {
     /// only).
     #[arg(long, default_value_t = 4)]
     restarts: usize,
+    /// Partitions tried in any case (seeds seed, seed+1, …): the valid polygon mesh with the
+    /// least mean distance to the input is written.
+    #[arg(long, default_value_t = 3)]
+    tries: usize,
     /// Region-growing / merge angle in degrees.
     #[arg(long, default_value_t = 20.0)]
     angle: f64,
@@ -65,6 +69,7 @@ pub fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     let mut opts = ApproxOptions::new(args.k);
     opts.seed = args.seed;
     opts.restarts = args.restarts;
+    opts.tries = args.tries;
     opts.angle_deg = args.angle;
     opts.construction = args.construction;
     opts.validate()?;
