@@ -1299,6 +1299,32 @@ pub fn mesh_obj(positions: &[V3], faces: &[[u32; 3]]) -> String {
     s
 }
 
+/// Meshes the unit tests of the stages share.
+#[cfg(test)]
+pub(crate) mod testing {
+    use crate::mesh::{Topology, TriMesh};
+    use std::path::Path;
+
+    /// n×n vertices in the plane z = 0, each square cut along the same diagonal: an interior
+    /// vertex has six faces around it.
+    pub fn grid(n: u32) -> (TriMesh, Topology) {
+        let positions = (0..n * n)
+            .map(|i| [(i % n) as f64, (i / n) as f64, 0.0])
+            .collect();
+        let mut faces = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let a = y * n + x;
+                faces.push([a, a + 1, a + n + 1]);
+                faces.push([a, a + n + 1, a + n]);
+            }
+        }
+        let m = TriMesh { positions, faces };
+        let t = Topology::build(&m, Path::new("grid")).unwrap();
+        (m, t)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::split_candidates;

@@ -1125,25 +1125,11 @@ pub fn components(topo: &Topology) -> (usize, usize) {
 mod tests {
     use super::*;
     use crate::mesh::TriMesh;
-    use std::path::Path;
 
-    /// 5×5 vertices in the plane z = 0, 32 triangles; vertex 12, the centre, has six faces
-    /// around it and a ring of faces around those.
+    /// 5×5 vertices, 32 triangles; vertex 12, the centre, has six faces around it and a
+    /// ring of faces around those.
     fn grid() -> (TriMesh, Topology) {
-        let positions = (0..25)
-            .map(|i| [(i % 5) as f64, (i / 5) as f64, 0.0])
-            .collect();
-        let mut faces = Vec::new();
-        for y in 0..4u32 {
-            for x in 0..4u32 {
-                let a = y * 5 + x;
-                faces.push([a, a + 1, a + 6]);
-                faces.push([a, a + 6, a + 5]);
-            }
-        }
-        let m = TriMesh { positions, faces };
-        let t = Topology::build(&m, Path::new("grid")).unwrap();
-        (m, t)
+        crate::approx::testing::grid(5)
     }
 
     #[test]

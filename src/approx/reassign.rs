@@ -385,24 +385,10 @@ fn try_move(
 mod tests {
     use super::*;
     use crate::mesh::TriMesh;
-    use std::path::Path;
 
     /// 3×3 vertices, 8 triangles; the centre vertex 4 has six faces around it.
     fn grid() -> (TriMesh, Topology) {
-        let positions = (0..9)
-            .map(|i| [(i % 3) as f64, (i / 3) as f64, 0.0])
-            .collect();
-        let mut faces = Vec::new();
-        for y in 0..2u32 {
-            for x in 0..2u32 {
-                let a = y * 3 + x;
-                faces.push([a, a + 1, a + 4]);
-                faces.push([a, a + 4, a + 3]);
-            }
-        }
-        let m = TriMesh { positions, faces };
-        let t = Topology::build(&m, Path::new("grid")).unwrap();
-        (m, t)
+        crate::approx::testing::grid(3)
     }
 
     #[test]
