@@ -1124,17 +1124,11 @@ pub fn components(topo: &Topology) -> (usize, usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::TriMesh;
-
-    /// 5×5 vertices, 32 triangles; vertex 12, the centre, has six faces around it and a
-    /// ring of faces around those.
-    fn grid() -> (TriMesh, Topology) {
-        crate::approx::testing::grid(5)
-    }
 
     #[test]
     fn unpinch_moves_one_wedge_and_keeps_every_region_connected() {
-        let (m, t) = grid();
+        // 5×5 vertices: vertex 12, the centre, has six faces around it and a ring around those.
+        let (m, t) = crate::approx::testing::grid(5);
         let v = 12;
         let (fs, border) = star(&t, &m.faces, v);
         assert!(!border);
@@ -1168,7 +1162,8 @@ mod tests {
 
     #[test]
     fn a_region_touching_itself_once_is_left_alone() {
-        let (m, t) = grid();
+        // 5×5 vertices: vertex 12, the centre, has six faces around it and a ring around those.
+        let (m, t) = crate::approx::testing::grid(5);
         let (fs, _) = star(&t, &m.faces, 12);
         let mut labels = vec![0u32; m.faces.len()];
         for (&f, l) in fs.iter().zip([1, 1, 1, 2, 2, 0]) {
