@@ -963,9 +963,14 @@ pub fn realise(
         }
         let named = defect.regions();
         let fresh = seen.insert(hash_of(&labels));
+        // The seen set rules out cycles of wedge moves; the count (one per vertex) bounds a
+        // long walk through partitions not seen before.
         if let Defect::Pinch { vertex, twice, .. } = defect {
             let mut trial = labels.clone();
-            if unpinch(topo, faces, &mut trial, vertex, twice) && !seen.contains(&hash_of(&trial)) {
+            if unpinched < topo.n_vertices
+                && unpinch(topo, faces, &mut trial, vertex, twice)
+                && !seen.contains(&hash_of(&trial))
+            {
                 labels = trial;
                 unpinched += 1;
                 defects.push(defect);
