@@ -100,8 +100,8 @@ def projector(n):
 
 # ---------------------------------------------------------------- reading
 
-def read_polygons(path):
-    """(merged positions, polygons as lists of merged vertex ids, number of dropped duplicate corners)."""
+def read_obj(path):
+    """(positions, faces as lists of 0-based v ids) of an OBJ, vertices as written."""
     raw, faces = [], []
     with open(path, encoding="utf-8", errors="replace") as f:
         for line in f:
@@ -119,6 +119,12 @@ def read_polygons(path):
                         raise ValueError(f"{path}: face corner {c} refers to a missing v ({len(raw)} read)")
                     face.append(i)
                 faces.append(face)
+    return raw, faces
+
+
+def read_polygons(path):
+    """(merged positions, polygons as lists of merged vertex ids, number of dropped duplicate corners)."""
+    raw, faces = read_obj(path)
     # Merge by exact coordinates (0.0 and -0.0 hash alike): a writer may duplicate a vertex per
     # polygon, and the edge pairing below has to see through that.
     ids, pos, remap = {}, [], []
@@ -149,21 +155,13 @@ def bbox_diagonal(points):
 def input_boundary(path):
     """(boundary edge count, bbox diagonal) of a triangle/polygon OBJ, vertices NOT merged
     (the input's own connectivity decides whether it has a boundary)."""
-    pos, count = [], Counter()
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for line in f:
-            parts = line.split()
-            if not parts:
-                continue
-            if parts[0] == "v":
-                pos.append((float(parts[1]), float(parts[2]), float(parts[3])))
-            elif parts[0] == "f":
-                face = [int(c.split("/")[0]) for c in parts[1:]]
-                face = [i - 1 if i > 0 else len(pos) + i for i in face]
-                for k in range(len(face)):
-                    a, b = face[k - 1], face[k]
-                    if a != b:
-                        count[(a, b) if a < b else (b, a)] += 1
+    pos, faces = read_obj(path)
+    count = Counter()
+    for face in faces:
+        for k in range(len(face)):
+            a, b = face[k - 1], face[k]
+            if a != b:
+                count[(a, b) if a < b else (b, a)] += 1
     return sum(1 for m in count.values() if m == 1), bbox_diagonal(pos)
 
 

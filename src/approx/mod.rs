@@ -527,12 +527,15 @@ fn best_run(
 }
 
 /// What the seed-independent stages give every run: the input's face normals and areas, the
-/// L0-smoothed normals and the updated vertices, and how long each stage took.
+/// L0-smoothed normals, the updated vertices and their face areas, and how long each stage
+/// took.
 struct Smoothed {
     n0: Vec<V3>,
     a0: Vec<f64>,
     sm: normals_l0::NormalL0Result,
     p1: Vec<V3>,
+    /// Face areas of the updated surface (`p1`).
+    a1: Vec<f64>,
     seconds_normals: f64,
     seconds_vertices: f64,
 }
@@ -571,11 +574,13 @@ fn smooth(
     progress(Stage::Vertices);
     let t = Instant::now();
     let p1 = vertex_update::update_vertices(mesh, topo, &sm.normals, &opts.vertices)?;
+    let (_, a1) = face_normals_areas(&p1, &mesh.faces);
     Ok(Smoothed {
         n0,
         a0,
         sm,
         p1,
+        a1,
         seconds_normals,
         seconds_vertices: t.elapsed().as_secs_f64(),
     })
@@ -605,12 +610,8 @@ fn run_once(
 
     progress(Stage::Cluster);
     let t = Instant::now();
-    let m1 = TriMesh {
-        positions: smoothed.p1.clone(),
-        faces: mesh.faces.clone(),
-    };
     // Cluster on the smoothed normals (piecewise constant); areas from the updated surface.
-    let (_, a1) = face_normals_areas(&m1.positions, &m1.faces);
+    let a1 = &smoothed.a1;
     // θ is refined while region growing yields fewer than K regions: the budget K is then
     // spent on flatter regions (smaller error, less to fold) instead of being left unused.
     let mut angle = opts.angle_deg;
@@ -618,7 +619,7 @@ fn run_once(
         let cl = cluster::cluster_faces(
             topo,
             &sm.normals,
-            &a1,
+            a1,
             &ClusterOptions {
                 k: opts.k,
                 angle_deg: angle,
@@ -632,8 +633,8 @@ fn run_once(
         angle *= 0.75;
     };
     let mut face_cluster = cl.face_cluster.clone();
-    let lloyd_rounds = lloyd::relax(topo, &sm.normals, &a1, &mut face_cluster, opts.lloyd_rounds);
-    let smoothed = if opts.smooth_boundaries {
+    let lloyd_rounds = lloyd::relax(topo, &sm.normals, a1, &mut face_cluster, opts.lloyd_rounds);
+    let boundary_moves = if opts.smooth_boundaries {
         cluster::smooth_boundaries(topo, &mut face_cluster, 16)
     } else {
         0
@@ -658,7 +659,7 @@ fn run_once(
         merged: cl.count,
         final_angle_deg: cl.final_angle_deg,
         lloyd_rounds,
-        faces_reassigned: reassigned + smoothed,
+        faces_reassigned: reassigned + boundary_moves,
         corner_merges: corner_merges + collapse_merges,
         crease_edges: sm.crease_edges,
         alm_rounds_normals: sm.rounds,
@@ -685,7 +686,7 @@ fn run_once(
         );
     }
     let m1 = TriMesh {
-        positions: m1.positions,
+        positions: smoothed.p1.clone(),
         faces: mesh.faces.clone(),
     };
 

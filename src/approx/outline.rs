@@ -262,19 +262,6 @@ fn place(j: Junction, planes: &[Plane], x: V3) -> Option<V3> {
     }
 }
 
-fn bbox_diagonal(pos: &[V3]) -> f64 {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in pos {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let d = sub(hi, lo);
-    dot(d, d).sqrt()
-}
-
 /// Region bounding boxes' diagonals: how far a corner may lie from its vertex.
 fn region_sizes(pos: &[V3], faces: &[[u32; 3]], labels: &[u32], n: usize) -> Vec<f64> {
     let mut lo = vec![[f64::INFINITY; 3]; n];
@@ -667,7 +654,7 @@ pub fn build(
     // Corners closer than this are one point at the output's precision (the planarity
     // tolerance, 1e-6 of the diagonal): at one junction they are merged, at two they are a
     // defect (two corners on one point pinch the polygons between them).
-    let tol = 1e-6 * bbox_diagonal(pos);
+    let tol = 1e-6 * crate::vol::tet::bbox_diagonal(pos);
     let cs = corners(topo, pos, faces, labels, planes, tol)?;
     if let Some(d) = coincident(&cs, tol) {
         return Err(d);
