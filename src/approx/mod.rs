@@ -1324,6 +1324,43 @@ pub(crate) mod testing {
         let t = Topology::build(&m, Path::new("grid")).unwrap();
         (m, t)
     }
+
+    /// The unit cube's surface, an n×n grid of squares on each side cut along a diagonal,
+    /// faces counter-clockwise seen from outside; with the side of each face (2·axis + 1 on
+    /// the far side).
+    pub fn cube(n: u32) -> (TriMesh, Topology, Vec<u32>) {
+        let mut index = std::collections::HashMap::new();
+        let mut m = TriMesh::default();
+        let mut side_of = Vec::new();
+        for axis in 0..3 {
+            for far in [false, true] {
+                let (u, w) = ((axis + 1) % 3, (axis + 2) % 3);
+                let mut id = |i: u32, j: u32| -> u32 {
+                    let mut p = [0; 3];
+                    p[axis] = if far { n } else { 0 };
+                    p[u] = i;
+                    p[w] = j;
+                    *index.entry(p).or_insert_with(|| {
+                        m.positions.push(p.map(|c| f64::from(c) / f64::from(n)));
+                        m.positions.len() as u32 - 1
+                    })
+                };
+                for i in 0..n {
+                    for j in 0..n {
+                        let q = [id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)];
+                        // e_u × e_w = +e_axis: (u, w) order is counter-clockwise from +axis.
+                        let (a, b) = ([q[0], q[1], q[2]], [q[0], q[2], q[3]]);
+                        for f in [a, b] {
+                            m.faces.push(if far { f } else { [f[0], f[2], f[1]] });
+                            side_of.push(2 * axis as u32 + u32::from(far));
+                        }
+                    }
+                }
+            }
+        }
+        let t = Topology::build(&m, Path::new("cube")).unwrap();
+        (m, t, side_of)
+    }
 }
 
 #[cfg(test)]

@@ -66,6 +66,17 @@ impl Moments {
         }
     }
 
+    /// The moments of the faces of `self` that are not those of `o` (a subset of them).
+    pub fn sub(&self, o: &Moments) -> Moments {
+        let neg = Moments {
+            area: -o.area,
+            first: scale(o.first, -1.0),
+            second: o.second.map(|row| row.map(|x| -x)),
+            normal: scale(o.normal, -1.0),
+        };
+        self.add(&neg)
+    }
+
     pub fn add(&self, o: &Moments) -> Moments {
         let mut second = self.second;
         for (i, row) in second.iter_mut().enumerate() {
@@ -701,6 +712,8 @@ pub struct Realised {
     pub merges: usize,
     /// Pinches answered by moving a wedge of faces to a neighbour (`unpinch`).
     pub unpinched: usize,
+    /// Boundaries of the given partition restored after the realisation (`resplit`).
+    pub resplits: usize,
 }
 
 /// Regions sharing an edge, as sorted pairs.
@@ -934,6 +947,8 @@ pub fn realise(
     let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
     let (mut defects, mut splits, mut merges, mut unpinched) = (Vec::new(), 0, 0, 0);
     let mut late_splits = 0;
+    let mut resplits = 0;
+    let start_labels = labels.clone();
     let mut seen = HashSet::new();
     let mut unsplittable: Vec<bool> = vec![false; n];
     let split = |labels: &mut [u32], r: u32, n: usize| {
@@ -1066,6 +1081,26 @@ pub fn realise(
             Err(_) => unsplittable[worst] = true,
         }
     }
+    // Then the boundaries of the given partition that the realisation merged away, where
+    // they are realisable now.
+    let mut resplit_tried = HashSet::new();
+    while n < k {
+        let Some(built) = resplit(
+            s,
+            &face_moments,
+            &start_labels,
+            &mut labels,
+            n,
+            &mut resplit_tried,
+        ) else {
+            break;
+        };
+        (polygons, triangles, triangle_region) = built;
+        n += 1;
+        splits += 1;
+        resplits += 1;
+        unsplittable.push(false);
+    }
     let planes = Fits::new(&face_moments, &labels, n).planes();
     Ok(Realised {
         polygons,
@@ -1077,7 +1112,91 @@ pub fn realise(
         splits,
         merges,
         unpinched,
+        resplits,
     })
+}
+
+/// Restores one boundary of the given partition `start` inside a region of `labels` (`n`
+/// regions) that keeps the partition realisable: the part of a region of `start` that a
+/// region of `labels` holds, connected, with the rest of that region connected, becomes
+/// region `n`. Candidates go by the residual they remove, largest first; each is built once
+/// (`tried`, keyed by its faces). The polygon mesh of the first valid one, `None` when none
+/// is.
+///
+/// Why: the realisation answers a defect with a merge when no split is left to answer it,
+/// and each merge makes a larger region whose next defect is likelier (the cascade). The
+/// partition given to it fits like VSA's; once the partition is valid, the boundaries the
+/// merges removed are the natural splits to spend the budget on — many of them are
+/// realisable in the new surroundings, where the defect that removed them is gone.
+fn resplit(
+    s: &Surface<'_>,
+    face_moments: &[Moments],
+    start: &[u32],
+    labels: &mut [u32],
+    n: usize,
+    tried: &mut HashSet<u64>,
+) -> Option<Built> {
+    let fits = Fits::new(face_moments, labels, n);
+    let mut pieces: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+    for (f, (&r, &p)) in labels.iter().zip(start).enumerate() {
+        pieces.entry((r, p)).or_default().push(f as u32);
+    }
+    let mut candidates: Vec<(f64, Vec<u32>)> = Vec::new();
+    let mut trial = labels.to_vec();
+    for ((r, _), faces) in pieces {
+        let whole = fits.region[r as usize].area;
+        let m = faces
+            .iter()
+            .fold(Moments::default(), |m, &f| m.add(&face_moments[f as usize]));
+        if m.area >= whole * (1.0 - 1e-12) {
+            continue; // the piece is the whole region
+        }
+        for &f in &faces {
+            trial[f as usize] = n as u32;
+        }
+        let parts = region_parts(s.topo, &trial, n as u32);
+        for &f in &faces {
+            trial[f as usize] = r;
+        }
+        // Each connected part of the piece (whether the rest stays connected is checked
+        // when the candidate is tried).
+        for part in parts {
+            let pm = part
+                .iter()
+                .fold(Moments::default(), |m, &f| m.add(&face_moments[f as usize]));
+            let rest = fits.region[r as usize].sub(&pm);
+            let gain = fits.fit[r as usize].1 - fit_or_flat(&pm).1 - fit_or_flat(&rest).1;
+            candidates.push((gain, part));
+        }
+    }
+    candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    for (gain, part) in candidates {
+        if gain.is_nan() || gain <= 0.0 {
+            break;
+        }
+        let key = {
+            let mut p = part.clone();
+            p.sort_unstable();
+            hash_of(&p)
+        };
+        if !tried.insert(key) {
+            continue;
+        }
+        let r = labels[part[0] as usize];
+        let mut trial = labels.to_vec();
+        for &f in &part {
+            trial[f as usize] = n as u32;
+        }
+        if region_parts(s.topo, &trial, r).len() != 1 {
+            continue;
+        }
+        let planes = Fits::new(face_moments, &trial, n + 1).planes();
+        if let Ok(built) = build(s.topo, s.pos, s.faces, &trial, &planes) {
+            labels.copy_from_slice(&trial);
+            return Some(built);
+        }
+    }
+    None
 }
 
 /// The area moments of each input face.
@@ -1116,6 +1235,42 @@ pub fn components(topo: &Topology) -> (usize, usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cube's six sides given, two of them merged in the partition realised: the lost
+    /// boundary is restored (the six squares on the cube's eight corners), then nothing is
+    /// left to restore.
+    #[test]
+    fn resplit_restores_a_boundary_the_realisation_merged_away() {
+        let (m, t, sides) = crate::approx::testing::cube(3);
+        let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
+        let s = Surface {
+            topo: &t,
+            pos: &m.positions,
+            faces: &m.faces,
+            normals: &normals,
+            areas: &areas,
+        };
+        let fm = face_moments(&s);
+        // Sides 0 (x = 0) and 2 (y = 0) share an edge: one region, the others after it.
+        let mut labels: Vec<u32> = sides
+            .iter()
+            .map(|&q| match q {
+                0 | 2 => 0,
+                1 => 1,
+                q => q - 1,
+            })
+            .collect();
+        let mut tried = HashSet::new();
+        let (poly, _, _) = resplit(&s, &fm, &sides, &mut labels, 5, &mut tried).unwrap();
+        assert_eq!(poly.polygons.len(), 6);
+        assert_eq!(poly.positions.len(), 8);
+        assert!(poly.polygons.iter().all(|p| p.len() == 4));
+        // The same partition as the sides, up to numbering.
+        let pairs: HashSet<(u32, u32)> =
+            labels.iter().copied().zip(sides.iter().copied()).collect();
+        assert_eq!(pairs.len(), 6, "{pairs:?}");
+        assert!(resplit(&s, &fm, &sides, &mut labels, 6, &mut tried).is_none());
+    }
 
     #[test]
     fn unpinch_moves_one_wedge_and_keeps_every_region_connected() {
