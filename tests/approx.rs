@@ -722,7 +722,7 @@ fn outline_splits_an_unrealisable_partition_into_the_cube_sides() {
         normals: &normals,
         areas: &areas,
     };
-    let r = outline::realise(&s, vec![0; m.faces.len()], 1, 6).unwrap();
+    let r = outline::realise(&s, vec![0; m.faces.len()], 1, 6, true).unwrap();
     assert_eq!(r.planes.len(), 6);
     assert_eq!(r.merges, 0);
     assert!(r.splits >= 5 && !r.defects.is_empty());

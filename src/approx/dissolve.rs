@@ -86,20 +86,18 @@ pub fn dissolve_folded_regions(
     Ok(dissolved)
 }
 
-/// Region growing of region `r`'s faces into its neighbours (see module doc): new labels of
-/// `members`, or `None` when some face cannot be reached from a neighbour with a plane.
-fn hand_out(
+/// Region growing of region `r`'s faces (`members`) into its neighbours: each face goes to
+/// the region across one of its edges (a neighbour, or a face already handed out) for which
+/// `cost(face, region)` is least, cheapest first (`None`: that region takes no faces). New
+/// labels of `members`, or `None` when some face cannot be reached.
+pub(super) fn hand_out(
     topo: &Topology,
-    faces: &[[u32; 3]],
     fc: &[u32],
-    planes: &[Option<Plane>],
-    input: &[V3],
     r: u32,
     members: &[usize],
+    cost: impl Fn(usize, u32) -> Option<f64>,
 ) -> Option<Vec<(usize, u32)>> {
     let mut label: std::collections::HashMap<usize, u32> = std::collections::HashMap::new();
-    let normal = |f: usize| normalize(face_area_normal(input, faces[f])).unwrap_or([0.0; 3]);
-    // Cost of giving face f to region c: 1 − cos of the angle between their normals.
     let mut heap: BinaryHeap<Reverse<(u64, usize, u32)>> = BinaryHeap::new();
     let push_from =
         |f: usize, label: &std::collections::HashMap<usize, u32>, heap: &mut BinaryHeap<_>| {
@@ -110,11 +108,10 @@ fn hand_out(
                     continue;
                 }
                 let c = if fc[f] == r { label[&f] } else { fc[f] };
-                let Some(p) = planes[c as usize] else {
-                    continue;
-                };
-                let cost = (1.0 - dot(normal(g as usize), p.n)).max(0.0);
-                heap.push(Reverse((cost.to_bits(), g as usize, c)));
+                if let Some(k) = cost(g as usize, c) {
+                    // Non-negative floats order as their bits do.
+                    heap.push(Reverse((k.max(0.0).to_bits(), g as usize, c)));
+                }
             }
         };
     for &f in members {
@@ -153,7 +150,10 @@ fn try_dissolve(
     r: u32,
 ) -> Result<bool, SolveError> {
     let members: Vec<usize> = (0..fc.len()).filter(|&f| fc[f] == r).collect();
-    let Some(labels) = hand_out(topo, faces, fc, planes, input, r, &members) else {
+    let normal = |f: usize| normalize(face_area_normal(input, faces[f])).unwrap_or([0.0; 3]);
+    // Cost of giving face f to region c: 1 − cos of the angle between their normals.
+    let cost = |f: usize, c: u32| planes[c as usize].map(|p| 1.0 - dot(normal(f), p.n));
+    let Some(labels) = hand_out(topo, fc, r, &members, cost) else {
         return Ok(false);
     };
     try_relabel(

@@ -338,7 +338,9 @@ pub struct ApproxReport {
     /// Neighbourhoods of folds where sliding vertices across region boundaries removed bad
     /// faces (see [`slide`]), on the kept pass.
     pub slides_kept: usize,
-    /// Regions dissolved into their neighbours at the end (see [`dissolve`]).
+    /// Regions given away face by face to their neighbours: at the end of the press
+    /// construction (see [`dissolve`]); in the outline construction, regions whose outline
+    /// crossed itself, instead of a merge (see [`outline::realise`]).
     pub regions_dissolved: usize,
     /// Regions moved whole into one neighbour at the end (see [`dissolve::Moves::absorb_regions`]).
     pub regions_absorbed: usize,
@@ -497,7 +499,15 @@ fn best_run(
         }
         sub.seed = opts.seed.wrapping_add(i as u64);
         runs += 1;
-        match run_once(mesh, topo, &sub, &smoothed, progress) {
+        // Where giving a region away realises nothing, merges alone may.
+        let out = match run_once(mesh, topo, &sub, &smoothed, true, progress) {
+            Err(ApproxError::Unrealisable(_)) => {
+                runs += 1;
+                run_once(mesh, topo, &sub, &smoothed, false, progress)
+            }
+            out => out,
+        };
+        match out {
             Ok(out) => {
                 if best.as_ref().is_none_or(|b| key(&out) < key(b)) {
                     best = Some(out);
@@ -505,6 +515,18 @@ fn best_run(
             }
             // Another seed's partition may be realisable.
             Err(e @ ApproxError::Unrealisable(_)) => unrealised = Some(e),
+            Err(e) => return Err(e),
+        }
+    }
+    // Giving a region away stops the cascade of merges that a region whose outline crosses
+    // itself starts, but it can start one of its own: the partition kept is realised with
+    // merges alone too, and the mesh nearer the input kept.
+    if let Some(b) = best.as_ref().filter(|b| b.report.regions_dissolved > 0) {
+        sub.seed = b.report.seed_used;
+        runs += 1;
+        match run_once(mesh, topo, &sub, &smoothed, false, progress) {
+            Ok(out) if key(&out) < key(b) => best = Some(out),
+            Ok(_) | Err(ApproxError::Unrealisable(_)) => {}
             Err(e) => return Err(e),
         }
     }
@@ -592,6 +614,7 @@ fn run_once(
     topo: &Topology,
     opts: &ApproxOptions,
     smoothed: &Smoothed,
+    give_away: bool,
     progress: &mut dyn FnMut(Stage),
 ) -> Result<ApproxOutput, ApproxError> {
     let (n0, a0, sm) = (&smoothed.n0, &smoothed.a0, &smoothed.sm);
@@ -683,6 +706,7 @@ fn run_once(
             times,
             t_all,
             diag,
+            give_away,
         );
     }
     let m1 = TriMesh {
@@ -1056,6 +1080,7 @@ fn outline_run(
     mut times: StageTimes,
     t_all: Instant,
     diag: f64,
+    give_away: bool,
 ) -> Result<ApproxOutput, ApproxError> {
     let t = Instant::now();
     if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
@@ -1067,7 +1092,7 @@ fn outline_run(
             mean / diag
         );
     }
-    let r = outline::realise(surface, face_cluster, n_clusters, opts.k)
+    let r = outline::realise(surface, face_cluster, n_clusters, opts.k, give_away)
         .map_err(|d| ApproxError::Unrealisable(format!("seed {}: {d}", opts.seed)))?;
     times.polygons = t.elapsed().as_secs_f64();
     times.total = t_all.elapsed().as_secs_f64();
@@ -1094,11 +1119,12 @@ fn outline_run(
     let mut notes = Vec::new();
     if r.merges > 0 {
         notes.push(format!(
-            "{} regions (K = {}): {} splits, {} merges and {} wedges moved answered {} partitions the planes could not realise",
+            "{} regions (K = {}): {} splits, {} merges ({} of them regions given away to their neighbours) and {} wedges moved answered {} partitions the planes could not realise",
             r.planes.len(),
             opts.k,
             r.splits,
             r.merges,
+            r.dissolved,
             r.unpinched,
             r.defects.len()
         ));
@@ -1108,6 +1134,7 @@ fn outline_run(
         flipped_faces: flipped,
         degenerate_faces: degenerate,
         regions_split: r.splits,
+        regions_dissolved: r.dissolved,
         merge_passes: r.merges,
         polygons: r.polygons.polygons.len(),
         polygon_holes: r.polygons.holes,

@@ -714,6 +714,8 @@ pub struct Realised {
     pub unpinched: usize,
     /// Boundaries of the given partition restored after the realisation (`resplit`).
     pub resplits: usize,
+    /// Regions given away to their neighbours (`dissolve`; counted in `merges` too).
+    pub dissolved: usize,
 }
 
 /// Regions sharing an edge, as sorted pairs.
@@ -885,6 +887,59 @@ fn region_parts(topo: &Topology, labels: &[u32], r: u32) -> Vec<Vec<u32>> {
     parts
 }
 
+/// Region `r` given away to the regions around it, face by face: each face goes to the
+/// region across one of its edges whose plane it is nearest (integrated squared distance),
+/// nearest first (region growing into `r` with the neighbours' planes as proxies, as VSA
+/// grows its regions). The labels with the regions after `r` renumbered down by one, and
+/// how much the residual grows; `None` when `r` has no neighbour.
+///
+/// Why: a merge keeps the union of two regions, and when the defect it answers comes back
+/// the next merge grows the same region again — a cascade that ends in a few regions wrapped
+/// around the part. Giving the faces away grows each neighbour by the faces nearest its
+/// plane instead; the caller keeps whichever of the two costs less.
+fn dissolve(
+    topo: &Topology,
+    face_moments: &[Moments],
+    fits: &Fits,
+    labels: &[u32],
+    r: u32,
+) -> Option<(Vec<u32>, f64)> {
+    // The integrated squared distance of face f to region q's plane.
+    let cost = |f: usize, q: u32| {
+        let (p, _) = fits.fit[q as usize];
+        let m = &face_moments[f];
+        let mut c = p.d * p.d * m.area + 2.0 * p.d * dot(p.n, m.first);
+        for i in 0..3 {
+            for j in 0..3 {
+                c += p.n[i] * m.second[i][j] * p.n[j];
+            }
+        }
+        Some(c)
+    };
+    let members: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == r).collect();
+    let given = super::dissolve::hand_out(topo, labels, r, &members, cost)?;
+    let mut out = labels.to_vec();
+    for &(f, q) in &given {
+        out[f] = q;
+    }
+    let mut gained = vec![Moments::default(); fits.region.len()];
+    for (f, (&l, &o)) in labels.iter().zip(&out).enumerate() {
+        if l == r {
+            gained[o as usize] = gained[o as usize].add(&face_moments[f]);
+        }
+    }
+    let mut grow = -fits.fit[r as usize].1;
+    for (q, g) in gained.iter().enumerate().filter(|(_, g)| g.area > 0.0) {
+        grow += fit_or_flat(&fits.region[q].add(g)).1 - fits.fit[q].1;
+    }
+    for l in out.iter_mut() {
+        if *l > r {
+            *l -= 1;
+        }
+    }
+    Some((out, grow))
+}
+
 /// Merges region `gone` into `keep` and renumbers the regions after `gone` down by one.
 fn merge(labels: &mut [u32], keep: u32, gone: u32) {
     let keep = if keep > gone { keep - 1 } else { keep };
@@ -928,7 +983,9 @@ fn hash_of(labels: &[u32]) -> u64 {
 ///   merged plane fits worst by the least is merged — for that split, unless this returns to
 ///   a partition seen before (it would cycle);
 /// - otherwise the two regions named by the defect (or one of them and a neighbour) whose
-///   merged plane fits worst by the least are merged.
+///   merged plane fits worst by the least are merged — or, with `give_away`, for an outline
+///   crossing itself, its region is given away face by face to the regions around it
+///   (`dissolve`) when that raises the residual less.
 ///
 /// After the first merge, splits go on only on partitions not seen before and at most `k`
 /// times more; every merge removes a region, so this ends. Then the budget left is spent on
@@ -941,6 +998,7 @@ pub fn realise(
     mut labels: Vec<u32>,
     mut n: usize,
     k: usize,
+    give_away: bool,
 ) -> Result<Realised, Defect> {
     let (topo, pos, faces) = (s.topo, s.pos, s.faces);
     let face_moments = face_moments(s);
@@ -948,6 +1006,7 @@ pub fn realise(
     let (mut defects, mut splits, mut merges, mut unpinched) = (Vec::new(), 0, 0, 0);
     let mut late_splits = 0;
     let mut resplits = 0;
+    let mut dissolved = 0;
     let start_labels = labels.clone();
     let mut seen = HashSet::new();
     let mut unsplittable: Vec<bool> = vec![false; n];
@@ -1034,11 +1093,32 @@ pub fn realise(
         } else {
             fits.cheapest(both.into_iter())
         };
-        let Some((keep, gone)) = pick else {
-            return Err(defect);
+        // A region whose outline crosses itself turns too much for its plane, and so does
+        // its union with a neighbour: it is given away to the regions around it instead,
+        // where that costs less. (Other defects are in how several planes meet; a merge
+        // takes one of them out of the junction.)
+        let given = match &defect {
+            Defect::Outline { region, .. } if give_away => {
+                dissolve(topo, &face_moments, &fits, &labels, *region).map(|d| (*region, d))
+            }
+            _ => None,
         };
-        merge(&mut labels, keep, gone);
-        unsplittable.remove(gone as usize);
+        let merge_cost = pick.map_or(f64::INFINITY, |p| fits.merge_cost(p));
+        match (pick, given) {
+            (_, Some((r, (trial, cost)))) if cost < merge_cost => {
+                labels = trial;
+                unsplittable.remove(r as usize);
+                dissolved += 1;
+                if trace {
+                    eprintln!("approx outline: region {r} given away");
+                }
+            }
+            (Some((keep, gone)), _) => {
+                merge(&mut labels, keep, gone);
+                unsplittable.remove(gone as usize);
+            }
+            _ => return Err(defect),
+        }
         n -= 1;
         merges += 1;
         defects.push(defect);
@@ -1113,6 +1193,7 @@ pub fn realise(
         merges,
         unpinched,
         resplits,
+        dissolved,
     })
 }
 
@@ -1270,6 +1351,46 @@ mod tests {
             labels.iter().copied().zip(sides.iter().copied()).collect();
         assert_eq!(pairs.len(), 6, "{pairs:?}");
         assert!(resplit(&s, &fm, &sides, &mut labels, 6, &mut tried).is_none());
+    }
+
+    /// A band of faces folded over the cube's edge between the sides x = 1 and z = 1, given
+    /// away: each face returns to its own side (whose plane holds it exactly), and the
+    /// residual falls by the band's.
+    #[test]
+    fn dissolve_gives_each_face_to_the_neighbour_whose_plane_it_is_on() {
+        let (m, t, sides) = crate::approx::testing::cube(3);
+        let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
+        let s = Surface {
+            topo: &t,
+            pos: &m.positions,
+            faces: &m.faces,
+            normals: &normals,
+            areas: &areas,
+        };
+        let fm = face_moments(&s);
+        let centroid = |f: &[u32; 3]| {
+            let p = f.map(|v| m.positions[v as usize]);
+            [0, 1, 2].map(|i| (p[0][i] + p[1][i] + p[2][i]) / 3.0)
+        };
+        let labels: Vec<u32> = m
+            .faces
+            .iter()
+            .zip(&sides)
+            .map(|(f, &q)| {
+                let c = centroid(f);
+                match q {
+                    1 if c[2] > 2.0 / 3.0 => 6,
+                    5 if c[0] > 2.0 / 3.0 => 6,
+                    q => q,
+                }
+            })
+            .collect();
+        let fits = Fits::new(&fm, &labels, 7);
+        let band = fits.fit[6].1;
+        assert!(band > 1e-4, "{band}");
+        let (out, grow) = dissolve(&t, &fm, &fits, &labels, 6).unwrap();
+        assert_eq!(out, sides);
+        assert!((grow + band).abs() < 1e-9 * band, "{grow} {band}");
     }
 
     #[test]
