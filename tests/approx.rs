@@ -715,13 +715,7 @@ fn outline_splits_an_unrealisable_partition_into_the_cube_sides() {
     let m = noisy_cube(6, 0.01, 21);
     let t = topo(&m);
     let (normals, areas) = face_normals_areas(&m.positions, &m.faces);
-    let s = Surface {
-        topo: &t,
-        pos: &m.positions,
-        faces: &m.faces,
-        normals: &normals,
-        areas: &areas,
-    };
+    let s = Surface::new(&t, &m, &normals, &areas);
     let r = outline::realise(&s, vec![0; m.faces.len()], 1, 6, true).unwrap();
     assert_eq!(r.planes.len(), 6);
     assert_eq!(r.merges, 0);

@@ -689,13 +689,7 @@ fn run_once(
     };
     if opts.construction == Construction::Outline {
         progress(Stage::Polygons);
-        let surface = outline::Surface {
-            topo,
-            pos: &mesh.positions,
-            faces: &mesh.faces,
-            normals: n0,
-            areas: a0,
-        };
+        let surface = outline::Surface::new(topo, mesh, n0, a0);
         return outline_run(
             mesh,
             &surface,

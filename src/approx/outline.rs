@@ -961,6 +961,24 @@ pub struct Surface<'a> {
     pub areas: &'a [f64],
 }
 
+impl<'a> Surface<'a> {
+    /// The surface of `mesh` with its face normals and areas.
+    pub fn new(
+        topo: &'a Topology,
+        mesh: &'a crate::mesh::TriMesh,
+        normals: &'a [V3],
+        areas: &'a [f64],
+    ) -> Surface<'a> {
+        Surface {
+            topo,
+            pos: &mesh.positions,
+            faces: &mesh.faces,
+            normals,
+            areas,
+        }
+    }
+}
+
 fn hash_of(labels: &[u32]) -> u64 {
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -1324,13 +1342,7 @@ mod tests {
     fn resplit_restores_a_boundary_the_realisation_merged_away() {
         let (m, t, sides) = crate::approx::testing::cube(3);
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
-        let s = Surface {
-            topo: &t,
-            pos: &m.positions,
-            faces: &m.faces,
-            normals: &normals,
-            areas: &areas,
-        };
+        let s = Surface::new(&t, &m, &normals, &areas);
         let fm = face_moments(&s);
         // Sides 0 (x = 0) and 2 (y = 0) share an edge: one region, the others after it.
         let mut labels: Vec<u32> = sides
@@ -1360,13 +1372,7 @@ mod tests {
     fn dissolve_gives_each_face_to_the_neighbour_whose_plane_it_is_on() {
         let (m, t, sides) = crate::approx::testing::cube(3);
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
-        let s = Surface {
-            topo: &t,
-            pos: &m.positions,
-            faces: &m.faces,
-            normals: &normals,
-            areas: &areas,
-        };
+        let s = Surface::new(&t, &m, &normals, &areas);
         let fm = face_moments(&s);
         let centroid = |f: &[u32; 3]| {
             let p = f.map(|v| m.positions[v as usize]);
