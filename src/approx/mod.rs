@@ -1112,13 +1112,20 @@ fn outline_run(
     }
     let mut notes = Vec::new();
     if r.merges > 0 {
+        let given = if r.dissolved > 0 {
+            format!(
+                " ({} of them regions given away to their neighbours)",
+                r.dissolved
+            )
+        } else {
+            String::new()
+        };
         notes.push(format!(
-            "{} regions (K = {}): {} splits, {} merges ({} of them regions given away to their neighbours) and {} wedges moved answered {} partitions the planes could not realise",
+            "{} regions (K = {}): {} splits, {} merges{given} and {} wedges moved answered {} partitions the planes could not realise",
             r.planes.len(),
             opts.k,
             r.splits,
             r.merges,
-            r.dissolved,
             r.unpinched,
             r.defects.len()
         ));
