@@ -77,6 +77,17 @@ impl Moments {
         self.add(&neg)
     }
 
+    /// The integral of the squared distance to `p` over the faces.
+    pub fn sq_distance(&self, p: &Plane) -> f64 {
+        let mut c = p.d * p.d * self.area + 2.0 * p.d * dot(p.n, self.first);
+        for i in 0..3 {
+            for j in 0..3 {
+                c += p.n[i] * self.second[i][j] * p.n[j];
+            }
+        }
+        c
+    }
+
     pub fn add(&self, o: &Moments) -> Moments {
         let mut second = self.second;
         for (i, row) in second.iter_mut().enumerate() {
@@ -712,8 +723,6 @@ pub struct Realised {
     pub merges: usize,
     /// Pinches answered by moving a wedge of faces to a neighbour (`unpinch`).
     pub unpinched: usize,
-    /// Boundaries of the given partition restored after the realisation (`resplit`).
-    pub resplits: usize,
     /// Regions given away to their neighbours (`dissolve`; counted in `merges` too).
     pub dissolved: usize,
 }
@@ -862,10 +871,26 @@ fn unpinch(topo: &Topology, faces: &[[u32; 3]], labels: &mut [u32], v: u32, r: u
 
 /// The faces labelled `r`, by part connected across edges.
 fn region_parts(topo: &Topology, labels: &[u32], r: u32) -> Vec<Vec<u32>> {
-    let mut seen = vec![false; labels.len()];
+    parts(
+        topo,
+        labels.len(),
+        |f| labels[f] == r,
+        |_, g| labels[g] == r,
+    )
+}
+
+/// The faces for which `include` holds, by part connected across the edges between faces
+/// that `joined` joins (each part starts at its lowest face).
+fn parts(
+    topo: &Topology,
+    n_faces: usize,
+    include: impl Fn(usize) -> bool,
+    joined: impl Fn(usize, usize) -> bool,
+) -> Vec<Vec<u32>> {
+    let mut seen = vec![false; n_faces];
     let mut parts = Vec::new();
-    for first in 0..labels.len() {
-        if labels[first] != r || seen[first] {
+    for first in 0..n_faces {
+        if seen[first] || !include(first) {
             continue;
         }
         seen[first] = true;
@@ -875,7 +900,7 @@ fn region_parts(topo: &Topology, labels: &[u32], r: u32) -> Vec<Vec<u32>> {
             part.push(f);
             for &e in &topo.face_edges[f as usize] {
                 for g in topo.edge_faces[e as usize] {
-                    if g != NO_FACE && labels[g as usize] == r && !seen[g as usize] {
+                    if g != NO_FACE && !seen[g as usize] && joined(f as usize, g as usize) {
                         seen[g as usize] = true;
                         stack.push(g);
                     }
@@ -904,18 +929,7 @@ fn dissolve(
     labels: &[u32],
     r: u32,
 ) -> Option<(Vec<u32>, f64)> {
-    // The integrated squared distance of face f to region q's plane.
-    let cost = |f: usize, q: u32| {
-        let (p, _) = fits.fit[q as usize];
-        let m = &face_moments[f];
-        let mut c = p.d * p.d * m.area + 2.0 * p.d * dot(p.n, m.first);
-        for i in 0..3 {
-            for j in 0..3 {
-                c += p.n[i] * m.second[i][j] * p.n[j];
-            }
-        }
-        Some(c)
-    };
+    let cost = |f: usize, q: u32| Some(face_moments[f].sq_distance(&fits.fit[q as usize].0));
     let members: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == r).collect();
     let given = super::dissolve::hand_out(topo, labels, r, &members, cost)?;
     let mut out = labels.to_vec();
@@ -1023,7 +1037,6 @@ pub fn realise(
     let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
     let (mut defects, mut splits, mut merges, mut unpinched) = (Vec::new(), 0, 0, 0);
     let mut late_splits = 0;
-    let mut resplits = 0;
     let mut dissolved = 0;
     let start_labels = labels.clone();
     let mut seen = HashSet::new();
@@ -1196,7 +1209,6 @@ pub fn realise(
         (polygons, triangles, triangle_region) = built;
         n += 1;
         splits += 1;
-        resplits += 1;
         unsplittable.push(false);
     }
     let planes = Fits::new(&face_moments, &labels, n).planes();
@@ -1210,7 +1222,6 @@ pub fn realise(
         splits,
         merges,
         unpinched,
-        resplits,
         dissolved,
     })
 }
@@ -1236,37 +1247,26 @@ fn resplit(
     tried: &mut HashSet<u64>,
 ) -> Option<Built> {
     let fits = Fits::new(face_moments, labels, n);
-    let mut pieces: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
-    for (f, (&r, &p)) in labels.iter().zip(start).enumerate() {
-        pieces.entry((r, p)).or_default().push(f as u32);
-    }
+    // Each connected part of a given region that one region holds, unless it is all of it
+    // (whether the rest stays connected is checked when the candidate is tried).
+    let pieces = parts(
+        s.topo,
+        labels.len(),
+        |_| true,
+        |f, g| labels[f] == labels[g] && start[f] == start[g],
+    );
     let mut candidates: Vec<(f64, Vec<u32>)> = Vec::new();
-    let mut trial = labels.to_vec();
-    for ((r, _), faces) in pieces {
-        let whole = fits.region[r as usize].area;
-        let m = faces
+    for part in pieces {
+        let r = labels[part[0] as usize] as usize;
+        let pm = part
             .iter()
             .fold(Moments::default(), |m, &f| m.add(&face_moments[f as usize]));
-        if m.area >= whole * (1.0 - 1e-12) {
-            continue; // the piece is the whole region
+        if pm.area >= fits.region[r].area * (1.0 - 1e-12) {
+            continue; // the whole region
         }
-        for &f in &faces {
-            trial[f as usize] = n as u32;
-        }
-        let parts = region_parts(s.topo, &trial, n as u32);
-        for &f in &faces {
-            trial[f as usize] = r;
-        }
-        // Each connected part of the piece (whether the rest stays connected is checked
-        // when the candidate is tried).
-        for part in parts {
-            let pm = part
-                .iter()
-                .fold(Moments::default(), |m, &f| m.add(&face_moments[f as usize]));
-            let rest = fits.region[r as usize].sub(&pm);
-            let gain = fits.fit[r as usize].1 - fit_or_flat(&pm).1 - fit_or_flat(&rest).1;
-            candidates.push((gain, part));
-        }
+        let rest = fits.region[r].sub(&pm);
+        let gain = fits.fit[r].1 - fit_or_flat(&pm).1 - fit_or_flat(&rest).1;
+        candidates.push((gain, part));
     }
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
     for (gain, part) in candidates {
