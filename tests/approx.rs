@@ -9,14 +9,13 @@ use std::path::Path;
 use std::process::Command;
 
 use common::TempDir;
-use foldfree::approx::boundary_l0::{planarize, BoundaryL0Options};
 use foldfree::approx::cluster::{cluster_faces, ClusterOptions};
-use foldfree::approx::geom::{bbox_diagonal, dot, face_normals_areas, V3};
+use foldfree::approx::geom::{dot, face_normals_areas, V3};
 use foldfree::approx::normals_l0::{smooth_normals, NormalL0Options};
 use foldfree::approx::outline::{self, Moments, Surface};
 use foldfree::approx::polygons::ear_clip;
 use foldfree::approx::vertex_update::{update_vertices, VertexUpdateOptions};
-use foldfree::approx::{approximate, ApproxOptions, Construction};
+use foldfree::approx::{approximate, ApproxError, ApproxOptions};
 use foldfree::mesh::{Topology, TriMesh};
 
 /// Deterministic noise in [-1, 1]. Not `common::Rng`: the plane counts below were calibrated on
@@ -246,35 +245,6 @@ fn clustering_finds_six_sides_of_a_cube_and_one_region_of_a_grid() {
 }
 
 #[test]
-fn planarize_makes_each_cube_side_exactly_planar_on_the_axis_planes() {
-    let m = noisy_cube(5, 0.01, 13);
-    let t = topo(&m);
-    let (n0, _) = face_normals_areas(&m.positions, &m.faces);
-    let fc: Vec<u32> = n0.iter().map(|&n| side_of(n) as u32).collect();
-    let diag = bbox_diagonal(&m);
-    let p = planarize(&m, &t, &fc, 6, diag, &BoundaryL0Options::default()).unwrap();
-    assert!(
-        p.max_violation <= 1e-7 * diag,
-        "violation {}",
-        p.max_violation
-    );
-    for (s, pl) in p.planes.iter().enumerate() {
-        let pl = pl.expect("every side has vertices");
-        assert!(dot(pl.n, true_normal(s)) > 0.999, "side {s}: {:?}", pl.n);
-    }
-    // Cube corners sit on three planes, cube edges on two: recompute independently.
-    for (v, q) in p.positions.iter().enumerate() {
-        for (f, face) in m.faces.iter().enumerate() {
-            if face.contains(&(v as u32)) {
-                let pl = p.planes[fc[f] as usize].unwrap();
-                assert!((dot(pl.n, *q) + pl.d).abs() <= 1e-7 * diag);
-            }
-        }
-    }
-    assert_eq!(p.vertices_on_4plus, 0);
-}
-
-#[test]
 fn pipeline_turns_a_noisy_cube_into_six_planar_squares() {
     let m = noisy_cube(6, 0.01, 21);
     let t = topo(&m);
@@ -398,17 +368,7 @@ fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
     // OUT.obj: the polygons' triangles (a cube's 8 corners, 2 triangles per side).
     let (v, f) = obj_counts(&out);
     assert_eq!((v.len(), f.len()), (8, 12));
-    // The pressed construction keeps the input's vertices and faces in order.
-    let o = run(&[], &["--construction", "press"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let (v, f) = obj_counts(&out);
-    assert_eq!(v.len(), m.positions.len());
-    let faces: Vec<Vec<usize>> = m
-        .faces
-        .iter()
-        .map(|f| f.iter().map(|&i| i as usize + 1).collect())
-        .collect();
-    assert_eq!(f, faces, "same face order");
+    // The polygon OBJ: one quadrilateral per side on the cube's 8 corners.
     let (pv, pf) = obj_counts(&poly);
     assert_eq!((pv.len(), pf.len()), (8, 6));
     let r: serde_json::Value =
@@ -452,52 +412,6 @@ fn cli_writes_mesh_polygons_and_report_and_rejects_bad_input() {
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
-}
-
-/// Whole-region untangling (untangle2d): an L-shaped outline fanned around one free vertex.
-/// Its kernel is the unit square at the corner; the uniform Tutte position (mean of the six
-/// outline corners, (11/3, 11/3)) is outside it and inverts two triangles, which is why the
-/// barrier untangler exists. Known answer: no inverted triangle, the free vertex ends in the
-/// kernel, the outline does not move.
-#[test]
-fn untangle_2d_fixes_an_l_shape_fan_that_tutte_folds() {
-    use foldfree::approx::untangle2d::{untangle_2d, Reference, Untangle2dOptions};
-    let outline = [
-        [0.0, 0.0],
-        [10.0, 0.0],
-        [10.0, 1.0],
-        [1.0, 1.0],
-        [1.0, 10.0],
-        [0.0, 10.0],
-    ];
-    let faces: Vec<[usize; 3]> = (0..6).map(|i| [i, (i + 1) % 6, 6]).collect();
-    let p3 = |p: [f64; 2]| [p[0], p[1], 0.0];
-    let refs: Vec<Reference> = faces
-        .iter()
-        .map(|f| {
-            Reference::from_triangle(p3(outline[f[0]]), p3(outline[f[1]]), [0.5, 0.5, 0.0], 1.0)
-                .expect("a fan from (0.5, 0.5) over the L is non-degenerate")
-        })
-        .collect();
-    let mut x: Vec<[f64; 2]> = outline.to_vec();
-    x.push([11.0 / 3.0, 11.0 / 3.0]);
-    let signed = |x: &[[f64; 2]], f: &[usize; 3]| {
-        let (a, b, c) = (x[f[0]], x[f[1]], x[f[2]]);
-        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-    };
-    let inverted_before = faces.iter().filter(|f| signed(&x, f) <= 0.0).count();
-    assert_eq!(inverted_before, 2);
-    let mut free = vec![false; 6];
-    free.push(true);
-    let r = untangle_2d(&faces, &refs, &free, &mut x, &Untangle2dOptions::default());
-    assert_eq!(r.inverted, 0);
-    assert!(faces.iter().all(|f| signed(&x, f) > 0.0));
-    let c = x[6];
-    assert!(
-        c[0] > 0.0 && c[0] < 1.0 && c[1] > 0.0 && c[1] < 1.0,
-        "{c:?}"
-    );
-    assert_eq!(&x[..6], &outline[..]);
 }
 
 /// Open tube of radius 1 around the z axis: `seg` segments around, `rings` rows of quads,
@@ -598,45 +512,59 @@ fn pipeline_on_a_tube_gives_planar_strips_without_folds() {
     assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
 }
 
-/// Restarts: a run that folds is repeated with the next seeds, the best run is returned
-/// (never worse than the first), and a clean first run is not repeated. (The tube in two
-/// regions folds on seed 1 and not on seeds 2–4.)
+/// Restarts: seeds after the tries are run only while no partition was realised; when none
+/// is, the error says which seeds were tried and nothing is returned. (A tube in two regions
+/// cannot be realised: the two halves' planes are parallel, and the tube in one region has an
+/// outline that crosses itself in any plane.)
 #[test]
-fn restarts_keep_the_best_run_and_stop_when_clean() {
+fn restarts_run_only_while_no_partition_is_realised() {
     let m = tube(24, 4);
     let t = topo(&m);
-    let bad = |r: &foldfree::approx::ApproxReport| r.flipped_faces + r.degenerate_faces;
-    // The pressed construction: restarts are its answer to folds.
-    let new = |k: usize| ApproxOptions {
-        construction: Construction::Press,
-        ..ApproxOptions::new(k)
-    };
-    let mut opts = new(2);
-    opts.restarts = 0;
+    let mut opts = ApproxOptions::new(8);
     opts.tries = 1;
-    let first = approximate(&m, &t, &opts, &mut |_| {}).unwrap().report;
-    assert!(bad(&first) > 0, "the first run must fold for this test");
-    assert_eq!((first.runs, first.seed_used), (1, 1));
     opts.restarts = 3;
-    opts.restart_min_bad = 1;
-    let best = approximate(&m, &t, &opts, &mut |_| {}).unwrap().report;
-    assert!(best.runs > 1 && best.runs <= 4, "{} runs", best.runs);
-    assert!((1..=4).contains(&best.seed_used));
-    assert!(bad(&best) <= bad(&first));
-    assert!(best.seconds_all_runs >= best.seconds.total);
-    // The returned run is the one of its seed.
-    let mut again = new(2);
-    again.restarts = 0;
-    again.tries = 1;
-    again.seed = best.seed_used;
-    let one = approximate(&m, &t, &again, &mut |_| {}).unwrap().report;
-    assert_eq!(bad(&one), bad(&best));
-    // Clean on the first run: no restart.
-    let mut clean = new(8);
-    clean.restart_min_bad = 1;
-    clean.tries = 1;
-    let r = approximate(&m, &t, &clean, &mut |_| {}).unwrap().report;
-    assert_eq!((bad(&r), r.runs), (0, 1));
+    let r = approximate(&m, &t, &opts, &mut |_| {}).unwrap().report;
+    assert_eq!((r.seed_used, r.k_obtained <= 8), (1, true));
+    assert!(r.runs <= 2, "{} runs", r.runs);
+    assert!(r.seconds_all_runs >= r.seconds.total);
+    let mut two = ApproxOptions::new(2);
+    two.tries = 1;
+    two.restarts = 3;
+    match approximate(&m, &t, &two, &mut |_| {}) {
+        Err(e @ ApproxError::Unrealisable(_)) => {
+            assert_eq!(e.exit_code(), 1);
+            assert!(e.to_string().contains("seeds 1..=4"), "{e}");
+        }
+        other => panic!(
+            "expected no realisable partition, got {:?}",
+            other.map(|o| o.report)
+        ),
+    }
+}
+
+/// Through the CLI: when no seed's partition is realised, the run exits 1 saying so and
+/// writes none of its outputs.
+#[test]
+fn cli_writes_nothing_when_no_partition_is_realised() {
+    let tmp = TempDir::new("approx_unrealised");
+    let input = tmp.join("tube.obj");
+    write_obj(&input, &tube(24, 4));
+    let (out, poly, rep) = (tmp.join("o.obj"), tmp.join("p.obj"), tmp.join("r.json"));
+    let o = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("approx")
+        .arg(&input)
+        .args(["-k", "2", "-q", "--restarts", "1", "-o"])
+        .arg(&out)
+        .arg("--polygons")
+        .arg(&poly)
+        .arg("--report")
+        .arg(&rep)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("nothing was written"), "{err}");
+    assert!(!out.exists() && !poly.exists() && !rep.exists());
 }
 
 /// Tries: the partitions of seeds `seed .. seed + tries − 1` are all realised and the valid

@@ -61,44 +61,6 @@ impl Plane {
     }
 }
 
-/// A plane's 2D frame: the point of the plane nearest the origin and two orthonormal in-plane
-/// axes with `u × v = n`, so 2D orientation in the frame is orientation against the normal.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Frame {
-    pub o: V3,
-    pub u: V3,
-    pub v: V3,
-}
-
-impl Frame {
-    /// `None` only for a zero normal.
-    pub fn of(p: &Plane) -> Option<Frame> {
-        let n = p.n;
-        let axis = if n[0].abs() < 0.6 {
-            [1.0, 0.0, 0.0]
-        } else {
-            [0.0, 1.0, 0.0]
-        };
-        let u = normalize(cross(n, axis))?;
-        Some(Frame {
-            o: scale(n, -p.d),
-            u,
-            v: cross(n, u),
-        })
-    }
-
-    /// Coordinates of `x` (projected onto the plane) in the frame.
-    pub fn coords(&self, x: V3) -> [f64; 2] {
-        let q = sub(x, self.o);
-        [dot(q, self.u), dot(q, self.v)]
-    }
-
-    /// The plane's point with frame coordinates `c`.
-    pub fn point(&self, c: [f64; 2]) -> V3 {
-        add(self.o, add(scale(self.u, c[0]), scale(self.v, c[1])))
-    }
-}
-
 /// Least-squares plane through weighted points (PCA: normal = eigenvector of the smallest
 /// eigenvalue of the covariance), oriented along `orient` so that its normal agrees with the
 /// faces it stands for. `None` when there are no points or no weight.

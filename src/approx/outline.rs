@@ -20,7 +20,8 @@
 //! changes the partition (a split, or a merge), never the positions. `FOLDFREE_APPROX_TRACE`
 //! set in the environment prints each defect met to stderr.
 
-use std::collections::{HashMap, HashSet};
+use std::cmp::Reverse;
+use std::collections::{BinaryHeap, HashMap, HashSet};
 
 use super::geom::{add, cross, dot, normalize, scale, sub, Plane, V3};
 use super::intersect::first_crossing;
@@ -931,7 +932,7 @@ fn dissolve(
 ) -> Option<(Vec<u32>, f64)> {
     let cost = |f: usize, q: u32| Some(face_moments[f].sq_distance(&fits.fit[q as usize].0));
     let members: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == r).collect();
-    let given = super::dissolve::hand_out(topo, labels, r, &members, cost)?;
+    let given = hand_out(topo, labels, r, &members, cost)?;
     let mut out = labels.to_vec();
     for &(f, q) in &given {
         out[f] = q;
@@ -952,6 +953,55 @@ fn dissolve(
         }
     }
     Some((out, grow))
+}
+
+/// Region growing of region `r`'s faces (`members`) into its neighbours: each face goes to
+/// the region across one of its edges (a neighbour, or a face already handed out) for which
+/// `cost(face, region)` is least, cheapest first (`None`: that region takes no faces). New
+/// labels of `members`, or `None` when some face cannot be reached.
+fn hand_out(
+    topo: &Topology,
+    fc: &[u32],
+    r: u32,
+    members: &[usize],
+    cost: impl Fn(usize, u32) -> Option<f64>,
+) -> Option<Vec<(usize, u32)>> {
+    let mut label: HashMap<usize, u32> = std::collections::HashMap::new();
+    let mut heap: BinaryHeap<Reverse<(u64, usize, u32)>> = BinaryHeap::new();
+    let push_from = |f: usize, label: &HashMap<usize, u32>, heap: &mut BinaryHeap<_>| {
+        for &e in &topo.face_edges[f] {
+            let ef = topo.edge_faces[e as usize];
+            let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
+            if g == NO_FACE || fc[g as usize] != r || label.contains_key(&(g as usize)) {
+                continue;
+            }
+            let c = if fc[f] == r { label[&f] } else { fc[f] };
+            if let Some(k) = cost(g as usize, c) {
+                // Non-negative floats order as their bits do.
+                heap.push(Reverse((k.max(0.0).to_bits(), g as usize, c)));
+            }
+        }
+    };
+    for &f in members {
+        for &e in &topo.face_edges[f] {
+            let ef = topo.edge_faces[e as usize];
+            let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
+            if g != NO_FACE && fc[g as usize] != r {
+                push_from(g as usize, &label, &mut heap);
+            }
+        }
+    }
+    while let Some(Reverse((_, f, c))) = heap.pop() {
+        if label.contains_key(&f) {
+            continue;
+        }
+        label.insert(f, c);
+        push_from(f, &label, &mut heap);
+    }
+    members
+        .iter()
+        .map(|&f| label.get(&f).map(|&c| (f, c)))
+        .collect()
 }
 
 /// Merges region `gone` into `keep` and renumbers the regions after `gone` down by one.
@@ -1310,12 +1360,8 @@ fn face_moments(s: &Surface<'_>) -> Vec<Moments> {
 }
 
 /// Each region's least-squares plane (for traces).
-pub fn fit_planes(s: &Surface<'_>, labels: &[u32], n: usize) -> Vec<Option<Plane>> {
-    Fits::new(&face_moments(s), labels, n)
-        .planes()
-        .into_iter()
-        .map(Some)
-        .collect()
+pub fn fit_planes(s: &Surface<'_>, labels: &[u32], n: usize) -> Vec<Plane> {
+    Fits::new(&face_moments(s), labels, n).planes()
 }
 
 /// Connected components of the mesh without and with a border: a polygon mesh of it needs at

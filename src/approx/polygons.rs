@@ -1,17 +1,15 @@
-//! Stage 5: one planar polygon per region — the simplified mesh.
+//! The polygon mesh of the approximation and the polygon tools [`super::outline`] builds it
+//! with.
 //!
 //! A region's boundary is the set of its faces' half-edges whose other side is another region
-//! or nothing; chained head to tail they form loops, counter-clockwise (seen along the plane
-//! normal) for the outer loop and clockwise for holes, because the faces are. A loop vertex is
-//! a corner where three or more regions meet (the mesh's outside counting as one) or where the
-//! loop turns: between two regions the boundary lies on their planes' intersection line and is
-//! straight, so these are exactly the polygon's corners. OBJ faces cannot have holes, so a hole
-//! is joined to the outer loop by a bridge (a keyhole polygon); `--triangulate` ear-clips it.
+//! or nothing; chained head to tail they form loops (`region_loops`), counter-clockwise (seen
+//! along the plane normal) for the outer loop and clockwise for holes, because the faces are.
+//! OBJ faces cannot have holes, so a hole is joined to the outer loop by a bridge (a keyhole
+//! polygon, [`bridge_holes`]); `--triangulate` ear-clips it ([`ear_clip`]).
 
 use std::collections::HashMap;
 
-use super::cluster::vertex_clusters;
-use super::geom::{cross, dot, normalize, sub, V3};
+use super::geom::{cross, dot, normalize, V3};
 use crate::mesh::{Topology, NO_FACE};
 
 /// Polygons over a shared list of corner vertices.
@@ -27,9 +25,6 @@ pub struct PolygonMesh {
     /// Holes bridged.
     pub holes: usize,
 }
-
-/// A corner turns by more than this (radians) on a one-plane boundary (mesh border).
-const TURN: f64 = 2.0_f64 * std::f64::consts::PI / 180.0;
 
 /// An orthonormal frame of the plane with unit normal `n`.
 pub(super) fn basis(n: V3) -> (V3, V3) {
@@ -201,117 +196,11 @@ pub fn bridge_holes(
     poly
 }
 
-/// Builds the polygons of all regions on the output positions `pos`.
-pub fn extract(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    pos: &[V3],
-    face_cluster: &[u32],
-    n_regions: usize,
-) -> PolygonMesh {
-    let vc = vertex_clusters(topo, face_cluster);
-    let mut on_border = vec![false; topo.n_vertices];
-    for &e in &topo.boundary_edges {
-        for v in topo.edges[e as usize] {
-            on_border[v as usize] = true;
-        }
-    }
-    let mut normals = vec![[0.0; 3]; n_regions];
-    for (f, &face) in faces.iter().enumerate() {
-        let c = face_cluster[f] as usize;
-        normals[c] = super::geom::add(normals[c], super::geom::face_area_normal(pos, face));
-    }
-    let mut out = PolygonMesh::default();
-    let mut corner_of: HashMap<u32, u32> = HashMap::new();
-    for (c, loops) in region_loops(topo, faces, face_cluster, n_regions)
-        .into_iter()
-        .enumerate()
-    {
-        let Some(nrm) = normalize(normals[c]) else {
-            continue;
-        };
-        let (u, w) = basis(nrm);
-        let to2 = |v: u32| {
-            let q = pos[v as usize];
-            [dot(q, u), dot(q, w)]
-        };
-        // Corners of each loop.
-        let mut cloops: Vec<Vec<u32>> = Vec::new();
-        for lp in &loops {
-            let m = lp.len();
-            let mut cs: Vec<u32> = (0..m)
-                .filter(|&i| {
-                    let v = lp[i];
-                    let regions = vc[v as usize].len() + usize::from(on_border[v as usize]);
-                    if regions >= 3 {
-                        return true;
-                    }
-                    let a = sub(pos[v as usize], pos[lp[(i + m - 1) % m] as usize]);
-                    let b = sub(pos[lp[(i + 1) % m] as usize], pos[v as usize]);
-                    let (la, lb) = (dot(a, a).sqrt(), dot(b, b).sqrt());
-                    la > 0.0 && lb > 0.0 && (dot(a, b) / (la * lb)).clamp(-1.0, 1.0).acos() > TURN
-                })
-                .map(|i| lp[i])
-                .collect();
-            if cs.len() < 3 {
-                // Too few natural corners (a smooth hole): keep every loop vertex.
-                cs = lp.clone();
-            }
-            if cs.len() >= 3 {
-                cloops.push(cs);
-            }
-        }
-        if cloops.is_empty() {
-            continue;
-        }
-        // Outer loop = largest positive area; the rest are holes.
-        let areas: Vec<f64> = cloops
-            .iter()
-            .map(|l| area2(&l.iter().map(|&v| to2(v)).collect::<Vec<_>>()))
-            .collect();
-        let outer = (0..cloops.len())
-            .max_by(|&a, &b| areas[a].total_cmp(&areas[b]))
-            .unwrap_or(0);
-        let holes: Vec<Vec<u32>> = (0..cloops.len())
-            .filter(|&i| i != outer)
-            .map(|i| cloops[i].clone())
-            .collect();
-        out.holes += holes.len();
-        let poly = bridge_holes(&cloops[outer], holes, &to2);
-        let ids: Vec<u32> = poly
-            .iter()
-            .map(|&v| {
-                let next = out.corners.len() as u32;
-                *corner_of.entry(v).or_insert_with(|| {
-                    out.corners.push(v);
-                    out.positions.push(pos[v as usize]);
-                    next
-                })
-            })
-            .collect();
-        out.polygons.push(ids);
-        out.region.push(c as u32);
-    }
-    out
-}
-
 impl PolygonMesh {
     /// Triangles of all polygons (ear clipping in each region's plane), indices into `positions`.
     pub fn triangulate(&self) -> Vec<[u32; 3]> {
-        self.triangulate_with_regions().0
-    }
-
-    /// Whether two polygons cross each other (their triangles, [`super::intersect`]).
-    pub fn crossing(&self) -> Option<[u32; 2]> {
-        let (tris, region) = self.triangulate_with_regions();
-        super::intersect::first_crossing(&self.positions, &tris, &region)
-    }
-
-    /// [`PolygonMesh::triangulate`] and the region of each triangle.
-    pub fn triangulate_with_regions(&self) -> (Vec<[u32; 3]>, Vec<u32>) {
         let mut tris = Vec::new();
-        let mut regions = Vec::new();
-        for (poly, &reg) in self.polygons.iter().zip(&self.region) {
+        for poly in &self.polygons {
             let pts: Vec<V3> = poly.iter().map(|&i| self.positions[i as usize]).collect();
             let m = pts.len();
             let mut nrm = [0.0; 3];
@@ -323,10 +212,9 @@ impl PolygonMesh {
             let p2: Vec<[f64; 2]> = pts.iter().map(|&q| [dot(q, u), dot(q, w)]).collect();
             for t in ear_clip(&p2) {
                 tris.push(t.map(|k| poly[k]));
-                regions.push(reg);
             }
         }
-        (tris, regions)
+        tris
     }
 
     /// OBJ text: `v` per corner, `f` per polygon (or per triangle).

@@ -19,22 +19,12 @@ pub fn spmv(a: &CsMat<f64>, x: &[f64]) -> Vec<f64> {
     y
 }
 
-/// Solves the SPD system A X = B: by sparse Cholesky (one factorisation for every column;
-/// the stages' systems are Laplacians of the mesh or of its dual graph, whose factors stay
-/// sparse under AMD, while CG on them needs more iterations the larger the penalty or the
-/// weaker the anchor), or, if the factorisation fails (not numerically positive definite),
-/// by IC(0)-CG warm-started from `x`.
-pub fn solve_spd(
-    a: &CsMat<f64>,
-    b: &[Vec<f64>],
-    x: &mut [Vec<f64>],
-    tolerance: f64,
-) -> Result<(), SolveError> {
-    SpdSolver::default().solve(a, b, x, tolerance)
-}
-
-/// [`solve_spd`] for a sequence of systems with one sparsity pattern (a penalty that grows,
-/// a linearisation redone): the ordering and symbolic factorisation are computed once.
+/// Solves SPD systems A X = B of one sparsity pattern in sequence (a penalty that grows, a
+/// linearisation redone): by sparse Cholesky, the ordering and symbolic factorisation
+/// computed once and one numeric factorisation for every column (the stages' systems are
+/// Laplacians of the mesh or of its dual graph, whose factors stay sparse under AMD, while CG
+/// on them needs more iterations the larger the penalty or the weaker the anchor), or, if the
+/// factorisation fails (not numerically positive definite), by IC(0)-CG warm-started from `x`.
 #[derive(Default)]
 pub struct SpdSolver {
     symbolic: Option<CholeskySymbolic>,

@@ -2,10 +2,9 @@
 //! Nocedal & Wright, *Numerical Optimization*, 2nd ed. 2006, Algorithm 7.4 and eq. 7.20) with
 //! backtracking Armijo steps, and the ε schedule of the regularised barrier of Garanzha,
 //! Kaporin, Kudryavtseva, Protais, Ray & Sokolov (2021, "Foldover-free maps in 50 lines of
-//! code"). It exists because both untanglers — the planar patches of the approximation
-//! (`approx::untangle2d`) and the tet maps of `volmap` (`vol::untangle`) — minimise that
-//! barrier round by round with L-BFGS; they differ only in their energy ([`Objective`]), which
-//! lives with them.
+//! code"). The tet untangler of `volmap` (`vol::untangle`) minimises that barrier round by
+//! round with it; the energy ([`Objective`]) lives with the untangler, so another barrier
+//! problem reuses the minimiser and the schedule as they are.
 #![forbid(unsafe_code)]
 
 /// A smooth energy over a flat vector of unknowns.

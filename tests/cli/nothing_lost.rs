@@ -622,30 +622,27 @@ fn constraints_the_map_cannot_meet_exit_3() {
 }
 
 #[test]
-fn approx_never_writes_folded_output() {
-    let dir = scratch("approx_k1", &["bunny_npm.obj"]);
-    let args = |construction: &'static str| {
-        [
+fn approx_refuses_fewer_planes_than_the_mesh_needs() {
+    // One plane cannot bound a closed surface (a closed component needs four): refused up
+    // front, nothing written. (A partition no seed realises exits 1, nothing written:
+    // tests/approx.rs, `cli_writes_nothing_when_no_partition_is_realised`.)
+    refused(
+        "approx_k1",
+        &["bunny_npm.obj"],
+        &[
             "approx",
             "bunny_npm.obj",
             "-k",
             "1",
             "-q",
-            "--restarts",
-            "0",
             "-o",
             "o.obj",
             "--report",
             "r.json",
-            "--construction",
-            construction,
-        ]
-    };
-    // One plane cannot bound a closed surface: the pressed construction folds and writes
-    // nothing; the outline construction knows up front (a closed component needs four).
-    run(&dir, &args("press")).expect(1, "nothing was written");
-    run(&dir, &args("outline")).expect(2, "needs at least");
-    assert!(!dir.join("o.obj").exists() && !dir.join("r.json").exists());
+        ],
+        2,
+        "needs at least",
+    );
 }
 
 #[test]

@@ -14,8 +14,7 @@ pub struct ApproxArgs {
     /// Largest number of planar regions.
     #[arg(short, value_name = "K")]
     k: usize,
-    /// Output OBJ: the triangles of the polygons (the connectivity inside each region is new);
-    /// with `--construction press`, the input's v and f order with moved vertices.
+    /// Output OBJ: the triangles of the polygons (the connectivity inside each region is new).
     #[arg(short, long)]
     output: PathBuf,
     /// Also write one planar polygon per region (holes bridged in) to this OBJ.
@@ -27,9 +26,8 @@ pub struct ApproxArgs {
     /// Seed of the region-growing order.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Further runs with seeds seed+1, seed+2, … while no run gave a valid polygon mesh, or
-    /// the best so far has a flipped or degenerate face (the best run is written; 0 = one run
-    /// only).
+    /// Further runs with seeds seed+1, seed+2, … while no run gave a valid polygon mesh (0 =
+    /// only the --tries).
     #[arg(long, default_value_t = 4)]
     restarts: usize,
     /// Partitions tried in any case (seeds seed, seed+1, …): the valid polygon mesh with the
@@ -39,11 +37,6 @@ pub struct ApproxArgs {
     /// Region-growing / merge angle in degrees.
     #[arg(long, default_value_t = 20.0)]
     angle: f64,
-    /// How the polygons are made: `outline`, corners where the planes meet (the partition
-    /// changed where they cannot), or `press`, the input's vertices pressed onto the planes
-    /// (the previous construction, slower, kept for comparison).
-    #[arg(long, value_enum, default_value_t = foldfree::approx::Construction::Outline)]
-    construction: foldfree::approx::Construction,
     /// Write the JSON report here.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -71,7 +64,6 @@ pub fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     opts.restarts = args.restarts;
     opts.tries = args.tries;
     opts.angle_deg = args.angle;
-    opts.construction = args.construction;
     opts.validate()?;
     let validate = mesh::ValidateOptions {
         max_faces: Some(element_limit(args.max_faces)),
