@@ -286,16 +286,14 @@ fn place(j: Junction, planes: &[Plane], x: V3) -> Option<V3> {
 }
 
 /// Region bounding boxes' diagonals: how far a corner may lie from its vertex.
-fn region_sizes(pos: &[V3], faces: &[[u32; 3]], labels: &[u32], n: usize) -> Vec<f64> {
+fn region_sizes(face_box: &[[V3; 2]], labels: &[u32], n: usize) -> Vec<f64> {
     let mut lo = vec![[f64::INFINITY; 3]; n];
     let mut hi = vec![[f64::NEG_INFINITY; 3]; n];
-    for (f, face) in faces.iter().enumerate() {
-        let r = labels[f] as usize;
-        for &v in face {
-            for k in 0..3 {
-                lo[r][k] = lo[r][k].min(pos[v as usize][k]);
-                hi[r][k] = hi[r][k].max(pos[v as usize][k]);
-            }
+    for (b, &r) in face_box.iter().zip(labels) {
+        let r = r as usize;
+        for k in 0..3 {
+            lo[r][k] = lo[r][k].min(b[0][k]);
+            hi[r][k] = hi[r][k].max(b[1][k]);
         }
     }
     (0..n)
@@ -308,15 +306,9 @@ fn region_sizes(pos: &[V3], faces: &[[u32; 3]], labels: &[u32], n: usize) -> Vec
 
 /// The corners of every vertex where regions meet (see the module doc); corners of one
 /// junction closer than `tol` are one.
-fn corners(
-    topo: &Topology,
-    pos: &[V3],
-    faces: &[[u32; 3]],
-    labels: &[u32],
-    planes: &[Plane],
-    tol: f64,
-) -> Result<Corners, Defect> {
-    let size = region_sizes(pos, faces, labels, planes.len());
+fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners, Defect> {
+    let (pos, tol) = (s.pos, s.tol);
+    let size = region_sizes(&s.face_box, labels, planes.len());
     let mut out = Corners {
         positions: Vec::new(),
         vertex: Vec::new(),
@@ -324,29 +316,20 @@ fn corners(
         at: HashMap::new(),
     };
     let mut triples: HashMap<[u32; 3], u32> = HashMap::new();
-    let mut on_border = vec![false; topo.n_vertices];
-    for &e in &topo.boundary_edges {
-        for v in topo.edges[e as usize] {
-            on_border[v as usize] = true;
-        }
-    }
-    for v in 0..topo.n_vertices as u32 {
+    for v in 0..s.topo.n_vertices as u32 {
+        let (fs, border) = s.star(v);
         // Inside a region (most vertices): no corner.
-        let around = faces_at(topo, v);
-        if !on_border[v as usize]
-            && around
-                .iter()
-                .all(|&f| labels[f as usize] == labels[around[0] as usize])
+        if fs.is_empty()
+            || (!border
+                && fs
+                    .iter()
+                    .all(|&f| labels[f as usize] == labels[fs[0] as usize]))
         {
-            continue;
-        }
-        let (fs, border) = star(topo, faces, v);
-        if fs.is_empty() {
             continue;
         }
         // Regions in counter-clockwise order, runs collapsed.
         let mut seq: Vec<u32> = Vec::new();
-        for &f in &fs {
+        for &f in fs {
             let r = labels[f as usize];
             if seq.last() != Some(&r) {
                 seq.push(r);
@@ -667,19 +650,13 @@ type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
 
 /// The polygon mesh of a partition with its planes, and its triangles (in the polygons'
 /// planes); corners index into one shared list.
-pub fn build(
-    topo: &Topology,
-    pos: &[V3],
-    faces: &[[u32; 3]],
-    labels: &[u32],
-    planes: &[Plane],
-) -> Result<Built, Defect> {
-    // Corners closer than this are one point at the output's precision (the planarity
-    // tolerance, 1e-6 of the diagonal): at one junction they are merged, at two they are a
-    // defect (two corners on one point pinch the polygons between them).
-    let tol = 1e-6 * crate::vol::tet::bbox_diagonal(pos);
-    let cs = corners(topo, pos, faces, labels, planes, tol)?;
-    if let Some(d) = coincident(&cs, tol) {
+pub fn build(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Built, Defect> {
+    let (topo, faces) = (s.topo, s.faces);
+    // Corners closer than the tolerance are one point at the output's precision: at one
+    // junction they are merged, at two they are a defect (two corners on one point pinch the
+    // polygons between them).
+    let cs = corners(s, labels, planes)?;
+    if let Some(d) = coincident(&cs, s.tol) {
         return Err(d);
     }
     let mut mesh = PolygonMesh {
@@ -1016,13 +993,25 @@ fn merge(labels: &mut [u32], keep: u32, gone: u32) {
     }
 }
 
-/// The input surface: positions and faces, and the normals and areas splits follow.
+/// The input surface: positions and faces, and the normals and areas splits follow; with
+/// what every realisation of a partition reads and no partition changes, computed once (each
+/// run builds hundreds of polygon meshes of one surface).
 pub struct Surface<'a> {
     pub topo: &'a Topology,
     pub pos: &'a [V3],
     pub faces: &'a [[u32; 3]],
     pub normals: &'a [V3],
     pub areas: &'a [f64],
+    /// Each vertex's faces in counter-clockwise order ([`star`]): `star_faces` from
+    /// `star_start[v]` to `star_start[v + 1]`, and whether the vertex is on the border.
+    star_start: Vec<u32>,
+    star_faces: Vec<u32>,
+    on_border: Vec<bool>,
+    /// Each face's bounding box (region sizes are unions of them).
+    face_box: Vec<[V3; 2]>,
+    /// Corners closer than this are one point (1e-6 of the bounding box diagonal, the output's
+    /// planarity tolerance).
+    tol: f64,
 }
 
 impl<'a> Surface<'a> {
@@ -1033,13 +1022,51 @@ impl<'a> Surface<'a> {
         normals: &'a [V3],
         areas: &'a [f64],
     ) -> Surface<'a> {
+        let (pos, faces) = (&mesh.positions[..], &mesh.faces[..]);
+        let mut star_start = vec![0u32];
+        let mut star_faces = Vec::new();
+        let mut on_border = Vec::with_capacity(topo.n_vertices);
+        for v in 0..topo.n_vertices as u32 {
+            let (fs, border) = star(topo, faces, v);
+            star_faces.extend(fs);
+            star_start.push(star_faces.len() as u32);
+            on_border.push(border);
+        }
+        let face_box = faces
+            .iter()
+            .map(|f| {
+                let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+                for &v in f {
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(pos[v as usize][k]);
+                        hi[k] = hi[k].max(pos[v as usize][k]);
+                    }
+                }
+                [lo, hi]
+            })
+            .collect();
         Surface {
             topo,
-            pos: &mesh.positions,
-            faces: &mesh.faces,
+            pos,
+            faces,
             normals,
             areas,
+            star_start,
+            star_faces,
+            on_border,
+            face_box,
+            tol: 1e-6 * crate::vol::tet::bbox_diagonal(pos),
         }
+    }
+
+    /// The faces around `v` in counter-clockwise order and whether `v` is on the border
+    /// ([`star`]).
+    fn star(&self, v: u32) -> (&[u32], bool) {
+        let (a, b) = (self.star_start[v as usize], self.star_start[v as usize + 1]);
+        (
+            &self.star_faces[a as usize..b as usize],
+            self.on_border[v as usize],
+        )
     }
 }
 
@@ -1082,7 +1109,7 @@ pub fn realise(
     k: usize,
     give_away: bool,
 ) -> Result<Realised, Defect> {
-    let (topo, pos, faces) = (s.topo, s.pos, s.faces);
+    let (topo, faces) = (s.topo, s.faces);
     let face_moments = face_moments(s);
     let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
     let (mut defects, mut splits, mut merges, mut unpinched) = (Vec::new(), 0, 0, 0);
@@ -1096,7 +1123,7 @@ pub fn realise(
     };
     let (mut polygons, mut triangles, mut triangle_region) = loop {
         let fits = Fits::new(&face_moments, &labels, n);
-        let defect = match build(topo, pos, faces, &labels, &fits.planes()) {
+        let defect = match build(s, &labels, &fits.planes()) {
             Ok(x) => break x,
             Err(d) => d,
         };
@@ -1229,7 +1256,7 @@ pub fn realise(
             unsplittable[worst] = true;
             continue;
         }
-        match build(topo, pos, faces, &trial, &fits_after.planes()) {
+        match build(s, &trial, &fits_after.planes()) {
             Ok((p, t, tr)) => {
                 labels = trial;
                 n += 1;
@@ -1340,7 +1367,7 @@ fn resplit(
             continue;
         }
         let planes = Fits::new(face_moments, &trial, n + 1).planes();
-        if let Ok(built) = build(s.topo, s.pos, s.faces, &trial, &planes) {
+        if let Ok(built) = build(s, &trial, &planes) {
             labels.copy_from_slice(&trial);
             return Some(built);
         }

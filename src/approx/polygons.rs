@@ -7,8 +7,6 @@
 //! OBJ faces cannot have holes, so a hole is joined to the outer loop by a bridge (a keyhole
 //! polygon, [`bridge_holes`]); `--triangulate` ear-clips it ([`ear_clip`]).
 
-use std::collections::HashMap;
-
 use super::geom::{cross, dot, normalize, V3};
 use crate::mesh::{Topology, NO_FACE};
 
@@ -62,47 +60,79 @@ pub(super) fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2])
 }
 
 /// Region loops as vertex cycles (each in face direction: counter-clockwise seen along the
-/// normal for the outer loop, clockwise for holes).
+/// normal for the outer loop, clockwise for holes). Each region's loops start at its
+/// boundary vertices in increasing order; where a region leaves a vertex by several boundary
+/// half-edges, the one of the latest face goes first.
 pub(super) fn region_loops(
     topo: &Topology,
     faces: &[[u32; 3]],
     fc: &[u32],
     n: usize,
 ) -> Vec<Vec<Vec<u32>>> {
-    let mut out: Vec<HashMap<u32, Vec<u32>>> = vec![HashMap::new(); n];
+    // The boundary half-edges (region, from, to) in face order.
+    let mut half: Vec<(u32, u32, u32)> = Vec::new();
     for (f, face) in faces.iter().enumerate() {
         for k in 0..3 {
             let e = topo.face_edges[f][k] as usize;
             let [g0, g1] = topo.edge_faces[e];
             let g = if g0 as usize == f { g1 } else { g0 };
             if g == NO_FACE || fc[g as usize] != fc[f] {
-                let (a, b) = (face[k], face[(k + 1) % 3]);
-                out[fc[f] as usize].entry(a).or_default().push(b);
+                half.push((fc[f], face[k], face[(k + 1) % 3]));
             }
         }
     }
-    out.into_iter()
-        .map(|mut next| {
-            let mut starts: Vec<u32> = next.keys().copied().collect();
-            starts.sort_unstable();
-            let mut loops = Vec::new();
-            for s in starts {
-                while next.get(&s).is_some_and(|v| !v.is_empty()) {
-                    let mut lp = vec![s];
-                    let mut cur = s;
-                    while let Some(b) = next.get_mut(&cur).and_then(|v| v.pop()) {
-                        if b == s {
-                            break;
-                        }
-                        lp.push(b);
-                        cur = b;
+    // Grouped by source vertex, face order kept within a group (a counting sort).
+    let nv = topo.n_vertices;
+    let mut start = vec![0u32; nv + 1];
+    for h in &half {
+        start[h.1 as usize + 1] += 1;
+    }
+    for v in 0..nv {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut by_source = vec![0u32; half.len()];
+    for (i, h) in half.iter().enumerate() {
+        by_source[fill[h.1 as usize] as usize] = i as u32;
+        fill[h.1 as usize] += 1;
+    }
+    let mut used = vec![false; half.len()];
+    // The latest unused half-edge of region r leaving v.
+    let mut take = |r: u32, v: u32| -> Option<u32> {
+        let group = &by_source[start[v as usize] as usize..start[v as usize + 1] as usize];
+        let &i = group
+            .iter()
+            .rev()
+            .find(|&&i| !used[i as usize] && half[i as usize].0 == r)?;
+        used[i as usize] = true;
+        Some(half[i as usize].2)
+    };
+    let mut sources: Vec<Vec<u32>> = vec![Vec::new(); n];
+    for h in &half {
+        sources[h.0 as usize].push(h.1);
+    }
+    let mut out = Vec::with_capacity(n);
+    for (r, mut starts) in sources.into_iter().enumerate() {
+        let r = r as u32;
+        starts.sort_unstable();
+        starts.dedup();
+        let mut loops = Vec::new();
+        for s in starts {
+            while let Some(mut b) = take(r, s) {
+                let mut lp = vec![s];
+                while b != s {
+                    lp.push(b);
+                    match take(r, b) {
+                        Some(next) => b = next,
+                        None => break,
                     }
-                    loops.push(lp);
                 }
+                loops.push(lp);
             }
-            loops
-        })
-        .collect()
+        }
+        out.push(loops);
+    }
+    out
 }
 
 /// Ear clipping of a simple (possibly keyhole) polygon given by 2D points; returns index
