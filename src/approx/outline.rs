@@ -1096,11 +1096,11 @@ fn hash_of(labels: &[u32]) -> u64 {
 ///   crossing itself, its region is given away face by face to the regions around it
 ///   (`dissolve`) when that raises the residual less.
 ///
-/// After the first merge, splits go on only on partitions not seen before and at most `k`
-/// times more; every merge removes a region, so this ends. Then the budget left is spent on
-/// the worst-fitting region while a split cuts its residual to a quarter (a curved
-/// region's; a flat noisy one is left alone) and the result stays valid (a split that breaks
-/// it is undone and that region left alone). `Err` when a defect involves no pair of
+/// After the first merge, splits go on only on partitions not seen before, at most `k` times
+/// more with budget left and `k` more as swaps; every merge removes a region, so this ends.
+/// Then the budget left is spent on the worst-fitting region while a split cuts its residual
+/// to a quarter (a curved region's; a flat noisy one is left alone) and the result stays
+/// valid (a split that breaks it is undone and that region left alone). `Err` when a defect involves no pair of
 /// adjacent regions left to merge.
 pub fn realise(
     s: &Surface<'_>,
@@ -1113,7 +1113,7 @@ pub fn realise(
     let face_moments = face_moments(s);
     let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
     let (mut defects, mut splits, mut merges, mut unpinched) = (Vec::new(), 0, 0, 0);
-    let mut late_splits = 0;
+    let (mut late_splits, mut swaps) = (0, 0);
     let mut dissolved = 0;
     let start_labels = labels.clone();
     let mut seen = HashSet::new();
@@ -1146,12 +1146,20 @@ pub fn realise(
                 continue;
             }
         }
-        // Splits answer defects before the first merge, and after it up to `k` more times on
-        // partitions not met before: a region that turns too much is made worse by merging
-        // its neighbours into it, and the cap ends the alternation of splits and merges.
-        if merges == 0 || (fresh && late_splits < k) {
+        // Splits answer defects before the first merge, and after it on partitions not met
+        // before, up to `k` more times with budget left and `k` more with none (a swap: the
+        // cheapest merge elsewhere pays for the split): a region that turns too much is made
+        // worse by merging its neighbours into it. The two are counted apart because they
+        // are different moves — a swap keeps the region count, a late split raises it — and
+        // the caps end the alternation of splits and merges.
+        let used = if n < k { late_splits } else { swaps };
+        if merges == 0 || (fresh && used < k) {
             if merges > 0 {
-                late_splits += 1;
+                if n < k {
+                    late_splits += 1;
+                } else {
+                    swaps += 1;
+                }
             }
             if let Some(r) = split_target(&defect, &named, &fits, &unsplittable) {
                 if n < k {
