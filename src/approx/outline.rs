@@ -1098,10 +1098,12 @@ fn hash_of(labels: &[u32]) -> u64 {
 ///
 /// After the first merge, splits go on only on partitions not seen before, at most `k` times
 /// more with budget left and `k` more as swaps; every merge removes a region, so this ends.
-/// Then the budget left is spent on the worst-fitting region while a split cuts its residual
-/// to a quarter (a curved region's; a flat noisy one is left alone) and the result stays
-/// valid (a split that breaks it is undone and that region left alone). `Err` when a defect involves no pair of
-/// adjacent regions left to merge.
+/// Then the budget left goes, while the result stays valid (a split that breaks it is undone
+/// and that region left alone), to the worst-fitting region while a split cuts its residual
+/// to a quarter (a curved region's), then to the boundaries of the given partition that
+/// merges removed (`resplit`), then to the worst-fitting region while a split lowers its
+/// residual at all (`spend_budget`). `Err` when a defect involves no pair of adjacent
+/// regions left to merge.
 pub fn realise(
     s: &Surface<'_>,
     mut labels: Vec<u32>,
@@ -1239,43 +1241,20 @@ pub fn realise(
         merges += 1;
         defects.push(defect);
     };
-    // The budget left, worst fit first, each split kept only when the result stays valid.
-    while n < k {
-        let fits = Fits::new(&face_moments, &labels, n);
-        let Some(worst) = (0..n)
-            .filter(|&r| !unsplittable[r] && fits.fit[r].1 > 0.0)
-            .max_by(|&a, &b| fits.fit[a].1.total_cmp(&fits.fit[b].1))
-        else {
-            break;
-        };
-        let mut trial = labels.clone();
-        if !split(&mut trial, worst as u32, n) {
-            unsplittable[worst] = true;
-            continue;
-        }
-        let fits_after = Fits::new(&face_moments, &trial, n + 1);
-        // A region curved in one direction, halved across it, keeps 1/16 of its residual
-        // (the sagitta of a half is a quarter); a flat noisy one keeps most of it (each
-        // half's plane fits three more degrees of freedom of the noise, which on a coarse
-        // region can be half of them). Splits that do not cut the residual to a quarter spend
-        // the budget on noise — and skip doubly curved regions, which keep about half when
-        // halved once (measured in BENCHMARKS round 10: 0.75 fits the noisy cube's sides).
-        if fits_after.fit[worst].1 + fits_after.fit[n].1 > 0.25 * fits.fit[worst].1 {
-            unsplittable[worst] = true;
-            continue;
-        }
-        match build(s, &trial, &fits_after.planes()) {
-            Ok((p, t, tr)) => {
-                labels = trial;
-                n += 1;
-                splits += 1;
-                unsplittable.push(false);
-                polygons = p;
-                triangles = t;
-                triangle_region = tr;
-            }
-            Err(_) => unsplittable[worst] = true,
-        }
+    // The budget left: first where it removes curvature (a split that keeps at most a
+    // quarter of the region's residual), then the boundaries the merges removed, then wherever
+    // it lowers the residual at all.
+    let before = n;
+    if let Some(b) = spend_budget(
+        s,
+        &face_moments,
+        &mut labels,
+        &mut n,
+        k,
+        &mut unsplittable,
+        0.25,
+    ) {
+        (polygons, triangles, triangle_region) = b;
     }
     // Then the boundaries of the given partition that the realisation merged away, where
     // they are realisable now.
@@ -1293,9 +1272,21 @@ pub fn realise(
         };
         (polygons, triangles, triangle_region) = built;
         n += 1;
-        splits += 1;
         unsplittable.push(false);
     }
+    let mut unsplittable = vec![false; n];
+    if let Some(b) = spend_budget(
+        s,
+        &face_moments,
+        &mut labels,
+        &mut n,
+        k,
+        &mut unsplittable,
+        1.0,
+    ) {
+        (polygons, triangles, triangle_region) = b;
+    }
+    splits += n - before;
     let planes = Fits::new(&face_moments, &labels, n).planes();
     Ok(Realised {
         polygons,
@@ -1309,6 +1300,64 @@ pub fn realise(
         unpinched,
         dissolved,
     })
+}
+
+/// Spends the budget left (`n` of `k` regions used) on the worst-fitting region while its
+/// split keeps at most `keep` of its residual and the partition stays realisable; a region
+/// whose split fails either is not tried again (`unsplittable`). The polygon mesh of the last
+/// split kept.
+///
+/// Why `keep`: a region curved in one direction, halved across it, keeps 1/16 of its
+/// residual (the sagitta of a half is a quarter); a flat noisy one keeps most of it (each
+/// half's plane fits three more degrees of freedom of the noise: 0.75 on the noisy cube's
+/// sides, BENCHMARKS round 10). With `keep` = 1/4 the budget goes to curvature first; with 1
+/// what is left goes wherever it lowers the error — which is what the error at K planes asks
+/// for, once curvature and the boundaries the merges removed have had theirs.
+fn spend_budget(
+    s: &Surface<'_>,
+    face_moments: &[Moments],
+    labels: &mut Vec<u32>,
+    n: &mut usize,
+    k: usize,
+    unsplittable: &mut Vec<bool>,
+    keep: f64,
+) -> Option<Built> {
+    let mut last = None;
+    while *n < k {
+        let fits = Fits::new(face_moments, labels, *n);
+        let Some(worst) = (0..*n)
+            .filter(|&r| !unsplittable[r] && fits.fit[r].1 > 0.0)
+            .max_by(|&a, &b| fits.fit[a].1.total_cmp(&fits.fit[b].1))
+        else {
+            break;
+        };
+        let mut trial = labels.clone();
+        let halved = super::lloyd::split_region(
+            s.topo,
+            s.normals,
+            s.areas,
+            &mut trial,
+            worst as u32,
+            *n as u32,
+            10,
+        );
+        let after = Fits::new(face_moments, &trial, *n + 1);
+        let (kept, was) = (after.fit[worst].1 + after.fit[*n].1, fits.fit[worst].1);
+        if !halved || kept > keep * was || kept >= was {
+            unsplittable[worst] = true;
+            continue;
+        }
+        match build(s, &trial, &after.planes()) {
+            Ok(b) => {
+                *labels = trial;
+                *n += 1;
+                unsplittable.push(false);
+                last = Some(b);
+            }
+            Err(_) => unsplittable[worst] = true,
+        }
+    }
+    last
 }
 
 /// Restores one boundary of the given partition `start` inside a region of `labels` (`n`
