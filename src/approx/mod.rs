@@ -87,7 +87,9 @@ pub struct ApproxOptions {
     /// little (BENCHMARKS.md, planar approximation round 10).
     pub tries: usize,
     /// Further runs with seeds `seed + 1, seed + 2, …` while no run gave a valid polygon mesh
-    /// (each a whole partition; [`outline::realise`] decides validity).
+    /// (each a whole partition; [`outline::realise`] decides validity), or the best ends more
+    /// than a quarter farther from the input than the partition it was given (a cascade of
+    /// merges).
     pub restarts: usize,
     /// Region-growing / merge angle θ in degrees.
     pub angle_deg: f64,
@@ -222,6 +224,9 @@ pub struct ApproxReport {
     /// vertex on several regions counts the mean over them); planes are the final ones.
     pub mean_input_distance: f64,
     pub mean_input_distance_rel: f64,
+    /// The same for the partition as clustered (before the realisation changed it), each
+    /// region on its least-squares plane: what the realisation started from.
+    pub partition_mean_input_distance: f64,
     pub max_input_distance: f64,
     pub max_input_distance_rel: f64,
     /// Planarity of the output: worst distance of an output vertex to a plane of its region.
@@ -300,15 +305,16 @@ impl ApproxOutput {
     }
 }
 
-/// Runs the whole pipeline on a validated mesh (see [`crate::mesh::load`]), restarting with
-/// other seeds while no run gave a valid polygon mesh or folds are left (see
-/// `ApproxOptions::restarts`). `progress` is told when each stage starts.
+/// Runs the whole pipeline on a validated mesh (see [`crate::mesh::load`]): the partitions of
+/// `ApproxOptions::tries` seeds, then of further seeds while no valid polygon mesh came out or
+/// the best lost its planes to a cascade of merges (see `ApproxOptions::restarts`); the valid
+/// mesh nearest the input is returned. `progress` is told when each stage starts.
 ///
-/// Why restarts: which faces seed the regions decides the partition, and whether its planes
-/// realise it as a polygon mesh (or, pressed, without folds) is a property of the partition;
-/// another seed gives an independent partition, so a fault that survives one run's splits and
-/// merges (or repairs) is often absent from the next (BENCHMARKS.md, planar approximation
-/// rounds). Each restart costs a whole run.
+/// Why several seeds: which faces seed the regions decides the partition, and whether its
+/// planes realise it as a polygon mesh is a property of the partition; another seed gives an
+/// independent partition, so a fault that survives one run's splits and merges is often
+/// absent from the next (BENCHMARKS.md, planar approximation rounds). Each seed costs a
+/// clustering and a realisation; two run at a time (see `best_run`).
 pub fn approximate(
     mesh: &TriMesh,
     topo: &Topology,
@@ -333,6 +339,7 @@ pub fn approximate(
     for x in [
         &mut r.bbox_diagonal,
         &mut r.mean_input_distance,
+        &mut r.partition_mean_input_distance,
         &mut r.max_input_distance,
         &mut r.max_planarity_deviation,
     ] {
@@ -350,47 +357,83 @@ fn best_run(
 ) -> Result<ApproxOutput, ApproxError> {
     let t = Instant::now();
     let bad = |o: &ApproxOutput| o.report.flipped_faces + o.report.degenerate_faces;
+    // A realisation that ends more than a quarter farther from the input than the partition
+    // it was given has lost its planes to merges (a cascade); another seed's partition is an
+    // independent draw of that.
+    let done = |o: &ApproxOutput| {
+        bad(o) == 0 && o.report.mean_input_distance <= 1.25 * o.report.partition_mean_input_distance
+    };
     // Fewest bad faces, then the smaller mean distance.
     let key = |o: &ApproxOutput| (bad(o), o.report.mean_input_distance);
     let mut best: Option<(ApproxOutput, Partitioned)> = None;
     let mut unrealised: Option<ApproxError> = None;
     let mut runs = 0;
-    let mut sub = opts.clone();
     let smoothed = smooth(mesh, topo, opts, progress)?;
     let surface = outline::Surface::new(topo, mesh, &smoothed.n0, &smoothed.a0);
-    for i in 0..=opts.restarts.max(opts.tries.saturating_sub(1)) {
-        if i >= opts.tries.max(1) && best.as_ref().is_some_and(|b| bad(&b.0) == 0) {
-            break;
-        }
-        sub.seed = opts.seed.wrapping_add(i as u64);
-        runs += 1;
+    // One seed: its partition, realised giving regions away, or with merges alone where
+    // that realises nothing; with the realisations made.
+    let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
+        let mut sub = opts.clone();
+        sub.seed = seed;
         let part = partition(mesh, topo, &sub, &smoothed, progress);
-        // Where giving a region away realises nothing, merges alone may.
         let realised = |give_away, progress: &mut dyn FnMut(Stage)| {
             realise(mesh, &surface, &sub, &smoothed, &part, give_away, progress)
         };
-        let out = match realised(true, progress) {
-            Err(ApproxError::Unrealisable(_)) => {
-                runs += 1;
-                realised(false, progress)
-            }
-            out => out,
+        let (out, made) = match realised(true, progress) {
+            Err(ApproxError::Unrealisable(_)) => (realised(false, progress), 2),
+            out => (out, 1),
         };
-        match out {
-            Ok(out) => {
-                if best.as_ref().is_none_or(|b| key(&out) < key(&b.0)) {
-                    best = Some((out, part));
-                }
+        (out.map(|o| (o, part)), made)
+    };
+    let tries = opts.tries.max(1);
+    let last = opts.restarts.max(tries - 1);
+    // The draws are independent (each only reads the smoothed surface): two at a time on two
+    // threads, taken in seed order, and a restart drawn beside the one that made it
+    // unnecessary is dropped — the mesh kept is the one the seeds give one after the other.
+    let mut i = 0;
+    'draws: while i <= last {
+        let wave = (last + 1 - i).min(2);
+        let seeds: Vec<u64> = (i..i + wave)
+            .map(|j| opts.seed.wrapping_add(j as u64))
+            .collect();
+        let drawn: Vec<_> = if wave == 1 {
+            vec![draw(seeds[0], progress)]
+        } else {
+            progress(Stage::Cluster);
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = seeds
+                    .iter()
+                    .map(|&seed| scope.spawn(move || draw(seed, &mut |_| {})))
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            })
+        };
+        for (out, made) in drawn {
+            if i >= tries && best.as_ref().is_some_and(|b| done(&b.0)) {
+                break 'draws;
             }
-            // Another seed's partition may be realisable.
-            Err(e @ ApproxError::Unrealisable(_)) => unrealised = Some(e),
-            Err(e) => return Err(e),
+            i += 1;
+            runs += made;
+            match out {
+                Ok((out, part)) => {
+                    if best.as_ref().is_none_or(|b| key(&out) < key(&b.0)) {
+                        best = Some((out, part));
+                    }
+                }
+                // Another seed's partition may be realisable.
+                Err(e @ ApproxError::Unrealisable(_)) => unrealised = Some(e),
+                Err(e) => return Err(e),
+            }
         }
     }
     // Giving a region away stops the cascade of merges that a region whose outline crosses
     // itself starts, but it can start one of its own: the partition kept is realised with
     // merges alone too, and the mesh nearer the input kept.
     if let Some((b, part)) = best.as_mut().filter(|b| b.0.report.regions_dissolved > 0) {
+        let mut sub = opts.clone();
         sub.seed = b.report.seed_used;
         runs += 1;
         match realise(mesh, &surface, &sub, &smoothed, part, false, progress) {
@@ -587,14 +630,18 @@ fn realise(
     let diag = geom::bbox_diagonal(mesh);
     progress(Stage::Polygons);
     let t = Instant::now();
-    if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
+    // The partition as clustered, each region on its least-squares plane: the error the
+    // realisation starts from (a VSA-like partition, before any defect changed it).
+    let given = {
         let planes = outline::fit_planes(surface, &part.labels, part.n);
         let vc = cluster::vertex_clusters(surface.topo, &part.labels);
-        let (mean, _) = input_distances(&mesh.positions, &vc, &planes);
+        input_distances(&mesh.positions, &vc, &planes).0
+    };
+    if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
         eprintln!(
             "approx: partition before realising: {} regions, mean distance {:.3e}·diag",
             part.n,
-            mean / diag
+            given / diag
         );
     }
     let r = outline::realise(surface, part.labels.clone(), part.n, opts.k, give_away)
@@ -662,6 +709,7 @@ fn realise(
         bbox_diagonal: diag,
         mean_input_distance: mean,
         mean_input_distance_rel: rel(mean),
+        partition_mean_input_distance: given,
         max_input_distance: maxd,
         max_input_distance_rel: rel(maxd),
         max_planarity_deviation: maxp,

@@ -26,8 +26,9 @@ pub struct ApproxArgs {
     /// Seed of the region-growing order.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Further runs with seeds seed+1, seed+2, … while no run gave a valid polygon mesh (0 =
-    /// only the --tries).
+    /// Further runs with seeds seed+1, seed+2, … while no run gave a valid polygon mesh, or
+    /// the best lost its planes to merges (more than a quarter farther from the input than
+    /// its partition); 0 = only the --tries.
     #[arg(long, default_value_t = 4)]
     restarts: usize,
     /// Partitions tried in any case (seeds seed, seed+1, …): the valid polygon mesh with the
