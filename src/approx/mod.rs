@@ -375,7 +375,7 @@ fn best_run(
     let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
         let mut sub = opts.clone();
         sub.seed = seed;
-        let part = partition(mesh, topo, &sub, &smoothed, progress);
+        let part = partition(mesh, &surface, &sub, &smoothed, progress);
         let realised = |give_away, progress: &mut dyn FnMut(Stage)| {
             realise(mesh, &surface, &sub, &smoothed, &part, give_away, progress)
         };
@@ -520,6 +520,9 @@ fn smooth(
 struct Partitioned {
     labels: Vec<u32>,
     n: usize,
+    /// Mean distance of the input to the regions' least-squares planes: the error the
+    /// realisation starts from (a VSA-like partition, before any defect changed it).
+    error: f64,
     facts: PartitionFacts,
     seconds: f64,
 }
@@ -528,12 +531,13 @@ struct Partitioned {
 /// Lloyd relaxation and the merges of corners the planes cannot reach.
 fn partition(
     mesh: &TriMesh,
-    topo: &Topology,
+    surface: &outline::Surface<'_>,
     opts: &ApproxOptions,
     smoothed: &Smoothed,
     progress: &mut dyn FnMut(Stage),
 ) -> Partitioned {
     let (n0, a0, sm) = (&smoothed.n0, &smoothed.a0, &smoothed.sm);
+    let topo = surface.topo;
     let diag = geom::bbox_diagonal(mesh);
     progress(Stage::Cluster);
     let t = Instant::now();
@@ -580,9 +584,17 @@ fn partition(
     let collapse_merges = cluster::merge_collapsing_regions(topo, &mut labels, n0, a0);
     let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut labels);
     let n = renumber(&mut labels);
+    let planes = outline::fit_planes(surface, &labels, n);
+    let error = input_distances(
+        &mesh.positions,
+        &cluster::vertex_clusters(topo, &labels),
+        &planes,
+    )
+    .0;
     Partitioned {
         labels,
         n,
+        error,
         facts: PartitionFacts {
             grown: cl.grown,
             merged: cl.count,
@@ -630,18 +642,11 @@ fn realise(
     let diag = geom::bbox_diagonal(mesh);
     progress(Stage::Polygons);
     let t = Instant::now();
-    // The partition as clustered, each region on its least-squares plane: the error the
-    // realisation starts from (a VSA-like partition, before any defect changed it).
-    let given = {
-        let planes = outline::fit_planes(surface, &part.labels, part.n);
-        let vc = cluster::vertex_clusters(surface.topo, &part.labels);
-        input_distances(&mesh.positions, &vc, &planes).0
-    };
     if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
         eprintln!(
             "approx: partition before realising: {} regions, mean distance {:.3e}·diag",
             part.n,
-            given / diag
+            part.error / diag
         );
     }
     let r = outline::realise(surface, part.labels.clone(), part.n, opts.k, give_away)
@@ -709,7 +714,7 @@ fn realise(
         bbox_diagonal: diag,
         mean_input_distance: mean,
         mean_input_distance_rel: rel(mean),
-        partition_mean_input_distance: given,
+        partition_mean_input_distance: part.error,
         max_input_distance: maxd,
         max_input_distance_rel: rel(maxd),
         max_planarity_deviation: maxp,

@@ -1009,6 +1009,8 @@ pub struct Surface<'a> {
     on_border: Vec<bool>,
     /// Each face's bounding box (region sizes are unions of them).
     face_box: Vec<[V3; 2]>,
+    /// Each face's area moments (region fits are sums of them).
+    moments: Vec<Moments>,
     /// Corners closer than this are one point (1e-6 of the bounding box diagonal, the output's
     /// planarity tolerance).
     tol: f64,
@@ -1055,8 +1057,21 @@ impl<'a> Surface<'a> {
             star_faces,
             on_border,
             face_box,
+            moments: faces
+                .iter()
+                .map(|f| {
+                    let [a, b, c] = f.map(|i| pos[i as usize]);
+                    Moments::triangle(a, b, c)
+                })
+                .collect(),
             tol: 1e-6 * crate::vol::tet::bbox_diagonal(pos),
         }
+    }
+
+    /// Splits region `r` of `labels` in two, the new half labelled `n` (Lloyd, 10 rounds;
+    /// [`super::lloyd::split_region`]). False when it cannot be halved.
+    fn split(&self, labels: &mut [u32], r: u32, n: usize) -> bool {
+        super::lloyd::split_region(self.topo, self.normals, self.areas, labels, r, n as u32, 10)
     }
 
     /// The faces around `v` in counter-clockwise order and whether `v` is on the border
@@ -1112,7 +1127,7 @@ pub fn realise(
     give_away: bool,
 ) -> Result<Realised, Defect> {
     let (topo, faces) = (s.topo, s.faces);
-    let face_moments = face_moments(s);
+    let face_moments = &s.moments[..];
     let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
     let (mut defects, mut splits, mut merges, mut unpinched) = (Vec::new(), 0, 0, 0);
     let (mut late_splits, mut swaps) = (0, 0);
@@ -1120,11 +1135,9 @@ pub fn realise(
     let start_labels = labels.clone();
     let mut seen = HashSet::new();
     let mut unsplittable: Vec<bool> = vec![false; n];
-    let split = |labels: &mut [u32], r: u32, n: usize| {
-        super::lloyd::split_region(topo, s.normals, s.areas, labels, r, n as u32, 10)
-    };
+    let split = |labels: &mut [u32], r: u32, n: usize| s.split(labels, r, n);
     let (mut polygons, mut triangles, mut triangle_region) = loop {
-        let fits = Fits::new(&face_moments, &labels, n);
+        let fits = Fits::new(face_moments, &labels, n);
         let defect = match build(s, &labels, &fits.planes()) {
             Ok(x) => break x,
             Err(d) => d,
@@ -1217,7 +1230,7 @@ pub fn realise(
         // takes one of them out of the junction.)
         let given = match &defect {
             Defect::Outline { region, .. } if give_away => {
-                dissolve(topo, &face_moments, &fits, &labels, *region).map(|d| (*region, d))
+                dissolve(topo, face_moments, &fits, &labels, *region).map(|d| (*region, d))
             }
             _ => None,
         };
@@ -1245,49 +1258,26 @@ pub fn realise(
     // quarter of the region's residual), then the boundaries the merges removed, then wherever
     // it lowers the residual at all.
     let before = n;
-    if let Some(b) = spend_budget(
-        s,
-        &face_moments,
-        &mut labels,
-        &mut n,
-        k,
-        &mut unsplittable,
-        0.25,
-    ) {
+    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 0.25) {
         (polygons, triangles, triangle_region) = b;
     }
     // Then the boundaries of the given partition that the realisation merged away, where
     // they are realisable now.
     let mut resplit_tried = HashSet::new();
     while n < k {
-        let Some(built) = resplit(
-            s,
-            &face_moments,
-            &start_labels,
-            &mut labels,
-            n,
-            &mut resplit_tried,
-        ) else {
+        let Some(built) = resplit(s, &start_labels, &mut labels, n, &mut resplit_tried) else {
             break;
         };
         (polygons, triangles, triangle_region) = built;
         n += 1;
-        unsplittable.push(false);
     }
+    // Regions left alone at a quarter are tried again at any gain.
     let mut unsplittable = vec![false; n];
-    if let Some(b) = spend_budget(
-        s,
-        &face_moments,
-        &mut labels,
-        &mut n,
-        k,
-        &mut unsplittable,
-        1.0,
-    ) {
+    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 1.0) {
         (polygons, triangles, triangle_region) = b;
     }
     splits += n - before;
-    let planes = Fits::new(&face_moments, &labels, n).planes();
+    let planes = Fits::new(face_moments, &labels, n).planes();
     Ok(Realised {
         polygons,
         triangles,
@@ -1315,13 +1305,13 @@ pub fn realise(
 /// for, once curvature and the boundaries the merges removed have had theirs.
 fn spend_budget(
     s: &Surface<'_>,
-    face_moments: &[Moments],
     labels: &mut Vec<u32>,
     n: &mut usize,
     k: usize,
     unsplittable: &mut Vec<bool>,
     keep: f64,
 ) -> Option<Built> {
+    let face_moments = &s.moments[..];
     let mut last = None;
     while *n < k {
         let fits = Fits::new(face_moments, labels, *n);
@@ -1332,15 +1322,7 @@ fn spend_budget(
             break;
         };
         let mut trial = labels.clone();
-        let halved = super::lloyd::split_region(
-            s.topo,
-            s.normals,
-            s.areas,
-            &mut trial,
-            worst as u32,
-            *n as u32,
-            10,
-        );
+        let halved = s.split(&mut trial, worst as u32, *n);
         let after = Fits::new(face_moments, &trial, *n + 1);
         let (kept, was) = (after.fit[worst].1 + after.fit[*n].1, fits.fit[worst].1);
         if !halved || kept > keep * was || kept >= was {
@@ -1374,12 +1356,12 @@ fn spend_budget(
 /// realisable in the new surroundings, where the defect that removed them is gone.
 fn resplit(
     s: &Surface<'_>,
-    face_moments: &[Moments],
     start: &[u32],
     labels: &mut [u32],
     n: usize,
     tried: &mut HashSet<u64>,
 ) -> Option<Built> {
+    let face_moments = &s.moments[..];
     let fits = Fits::new(face_moments, labels, n);
     // Each connected part of a given region that one region holds, unless it is all of it
     // (whether the rest stays connected is checked when the candidate is tried).
@@ -1432,20 +1414,9 @@ fn resplit(
     None
 }
 
-/// The area moments of each input face.
-fn face_moments(s: &Surface<'_>) -> Vec<Moments> {
-    s.faces
-        .iter()
-        .map(|f| {
-            let [a, b, c] = f.map(|i| s.pos[i as usize]);
-            Moments::triangle(a, b, c)
-        })
-        .collect()
-}
-
-/// Each region's least-squares plane (for traces).
+/// Each region's least-squares plane.
 pub fn fit_planes(s: &Surface<'_>, labels: &[u32], n: usize) -> Vec<Plane> {
-    Fits::new(&face_moments(s), labels, n).planes()
+    Fits::new(&s.moments, labels, n).planes()
 }
 
 /// Connected components of the mesh without and with a border: a polygon mesh of it needs at
@@ -1465,34 +1436,39 @@ pub fn components(topo: &Topology) -> (usize, usize) {
 mod tests {
     use super::*;
 
+    /// Runs `test` on the unit cube's surface (3×3 squares a side) with the side of each face.
+    fn on_cube(test: impl FnOnce(&Surface<'_>, &[u32])) {
+        let (m, t, sides) = crate::approx::testing::cube(3);
+        let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
+        test(&Surface::new(&t, &m, &normals, &areas), &sides);
+    }
+
     /// The cube's six sides given, two of them merged in the partition realised: the lost
     /// boundary is restored (the six squares on the cube's eight corners), then nothing is
     /// left to restore.
     #[test]
     fn resplit_restores_a_boundary_the_realisation_merged_away() {
-        let (m, t, sides) = crate::approx::testing::cube(3);
-        let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
-        let s = Surface::new(&t, &m, &normals, &areas);
-        let fm = face_moments(&s);
-        // Sides 0 (x = 0) and 2 (y = 0) share an edge: one region, the others after it.
-        let mut labels: Vec<u32> = sides
-            .iter()
-            .map(|&q| match q {
-                0 | 2 => 0,
-                1 => 1,
-                q => q - 1,
-            })
-            .collect();
-        let mut tried = HashSet::new();
-        let (poly, _, _) = resplit(&s, &fm, &sides, &mut labels, 5, &mut tried).unwrap();
-        assert_eq!(poly.polygons.len(), 6);
-        assert_eq!(poly.positions.len(), 8);
-        assert!(poly.polygons.iter().all(|p| p.len() == 4));
-        // The same partition as the sides, up to numbering.
-        let pairs: HashSet<(u32, u32)> =
-            labels.iter().copied().zip(sides.iter().copied()).collect();
-        assert_eq!(pairs.len(), 6, "{pairs:?}");
-        assert!(resplit(&s, &fm, &sides, &mut labels, 6, &mut tried).is_none());
+        on_cube(|s, sides| {
+            // Sides 0 (x = 0) and 2 (y = 0) share an edge: one region, the others after it.
+            let mut labels: Vec<u32> = sides
+                .iter()
+                .map(|&q| match q {
+                    0 | 2 => 0,
+                    1 => 1,
+                    q => q - 1,
+                })
+                .collect();
+            let mut tried = HashSet::new();
+            let (poly, _, _) = resplit(s, sides, &mut labels, 5, &mut tried).unwrap();
+            assert_eq!(poly.polygons.len(), 6);
+            assert_eq!(poly.positions.len(), 8);
+            assert!(poly.polygons.iter().all(|p| p.len() == 4));
+            // The same partition as the sides, up to numbering.
+            let pairs: HashSet<(u32, u32)> =
+                labels.iter().copied().zip(sides.iter().copied()).collect();
+            assert_eq!(pairs.len(), 6, "{pairs:?}");
+            assert!(resplit(s, sides, &mut labels, 6, &mut tried).is_none());
+        });
     }
 
     /// A band of faces folded over the cube's edge between the sides x = 1 and z = 1, given
@@ -1500,33 +1476,31 @@ mod tests {
     /// residual falls by the band's.
     #[test]
     fn dissolve_gives_each_face_to_the_neighbour_whose_plane_it_is_on() {
-        let (m, t, sides) = crate::approx::testing::cube(3);
-        let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
-        let s = Surface::new(&t, &m, &normals, &areas);
-        let fm = face_moments(&s);
-        let centroid = |f: &[u32; 3]| {
-            let p = f.map(|v| m.positions[v as usize]);
-            [0, 1, 2].map(|i| (p[0][i] + p[1][i] + p[2][i]) / 3.0)
-        };
-        let labels: Vec<u32> = m
-            .faces
-            .iter()
-            .zip(&sides)
-            .map(|(f, &q)| {
-                let c = centroid(f);
-                match q {
-                    1 if c[2] > 2.0 / 3.0 => 6,
-                    5 if c[0] > 2.0 / 3.0 => 6,
-                    q => q,
-                }
-            })
-            .collect();
-        let fits = Fits::new(&fm, &labels, 7);
-        let band = fits.fit[6].1;
-        assert!(band > 1e-4, "{band}");
-        let (out, grow) = dissolve(&t, &fm, &fits, &labels, 6).unwrap();
-        assert_eq!(out, sides);
-        assert!((grow + band).abs() < 1e-9 * band, "{grow} {band}");
+        on_cube(|s, sides| {
+            let centroid = |f: &[u32; 3]| {
+                let p = f.map(|v| s.pos[v as usize]);
+                [0, 1, 2].map(|i| (p[0][i] + p[1][i] + p[2][i]) / 3.0)
+            };
+            let labels: Vec<u32> = s
+                .faces
+                .iter()
+                .zip(sides)
+                .map(|(f, &q)| {
+                    let c = centroid(f);
+                    match q {
+                        1 if c[2] > 2.0 / 3.0 => 6,
+                        5 if c[0] > 2.0 / 3.0 => 6,
+                        q => q,
+                    }
+                })
+                .collect();
+            let fits = Fits::new(&s.moments, &labels, 7);
+            let band = fits.fit[6].1;
+            assert!(band > 1e-4, "{band}");
+            let (out, grow) = dissolve(s.topo, &s.moments, &fits, &labels, 6).unwrap();
+            assert_eq!(out, sides);
+            assert!((grow + band).abs() < 1e-9 * band, "{grow} {band}");
+        });
     }
 
     #[test]
