@@ -379,8 +379,21 @@ fn best_run(
         let realised = |give_away, progress: &mut dyn FnMut(Stage)| {
             realise(mesh, &surface, &sub, &smoothed, &part, give_away, progress)
         };
+        // Giving a region away stops the cascade of merges that a region whose outline
+        // crosses itself starts, but it can start one of its own. Where it gave a region
+        // away and the realisation ended below K regions (merges the budget could not win
+        // back: a cascade), the partition is realised with merges alone too, in this draw —
+        // which draw ends nearest is only known once both are realised — and the mesh
+        // nearer the input kept. (A realisation with all K regions is tried so only if kept.)
         let (out, made) = match realised(true, progress) {
             Err(ApproxError::Unrealisable(_)) => (realised(false, progress), 2),
+            Ok(o) if o.report.regions_dissolved > 0 && o.report.k_obtained < sub.k => {
+                match realised(false, progress) {
+                    Ok(m) if key(&m) < key(&o) => (Ok(m), 2),
+                    Ok(_) | Err(ApproxError::Unrealisable(_)) => (Ok(o), 2),
+                    Err(e) => (Err(e), 2),
+                }
+            }
             out => (out, 1),
         };
         (out.map(|o| (o, part)), made)
@@ -429,10 +442,12 @@ fn best_run(
             }
         }
     }
-    // Giving a region away stops the cascade of merges that a region whose outline crosses
-    // itself starts, but it can start one of its own: the partition kept is realised with
-    // merges alone too, and the mesh nearer the input kept.
-    if let Some((b, part)) = best.as_mut().filter(|b| b.0.report.regions_dissolved > 0) {
+    // The kept realisation, if it gave regions away with all K regions left, realised with
+    // merges alone too.
+    if let Some((b, part)) = best
+        .as_mut()
+        .filter(|b| b.0.report.regions_dissolved > 0 && b.0.report.k_obtained == opts.k)
+    {
         let mut sub = opts.clone();
         sub.seed = b.report.seed_used;
         runs += 1;
@@ -451,7 +466,7 @@ fn best_run(
             "no run of seeds {}..={} gave a valid polygon mesh with at most K = {} regions (the \
              last: {why}); nothing was written (a larger K, or more --restarts, may)",
             opts.seed,
-            opts.seed.wrapping_add(opts.restarts as u64),
+            opts.seed.wrapping_add(last as u64),
             opts.k
         )));
     };
