@@ -370,29 +370,38 @@ fn best_run(
     let mut runs = 0;
     let smoothed = smooth(mesh, topo, opts, progress)?;
     let surface = outline::Surface::new(topo, mesh, &smoothed.n0, &smoothed.a0);
-    // One seed: its partition, realised giving regions away, or with merges alone where
-    // that realises nothing; with the realisations made.
-    let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
+    let with_seed = |seed: u64| {
         let mut sub = opts.clone();
         sub.seed = seed;
-        let part = partition(mesh, &surface, &sub, &smoothed, progress);
-        let realised = |give_away, progress: &mut dyn FnMut(Stage)| {
-            realise(mesh, &surface, &sub, &smoothed, &part, give_away, progress)
+        sub
+    };
+    // Giving a region away stops the cascade of merges that a region whose outline crosses
+    // itself starts, but it can start one of its own: `o`'s partition realised with merges
+    // alone too, and the mesh nearer the input kept.
+    let nearer_with_merges_alone =
+        |o: ApproxOutput, part: &Partitioned, progress: &mut dyn FnMut(Stage)| {
+            let sub = with_seed(o.report.seed_used);
+            match realise(mesh, &surface, &sub, &smoothed, part, false, progress) {
+                Ok(m) if key(&m) < key(&o) => Ok(m),
+                Ok(_) | Err(ApproxError::Unrealisable(_)) => Ok(o),
+                Err(e) => Err(e),
+            }
         };
-        // Giving a region away stops the cascade of merges that a region whose outline
-        // crosses itself starts, but it can start one of its own. Where it gave a region
-        // away and the realisation ended below K regions (merges the budget could not win
-        // back: a cascade), the partition is realised with merges alone too, in this draw —
-        // which draw ends nearest is only known once both are realised — and the mesh
-        // nearer the input kept. (A realisation with all K regions is tried so only if kept.)
-        let (out, made) = match realised(true, progress) {
-            Err(ApproxError::Unrealisable(_)) => (realised(false, progress), 2),
+    // One seed: its partition, realised giving regions away, or with merges alone where
+    // that realises nothing; with the realisations made. Where it gave a region away and
+    // ended below K regions (merges the budget could not win back: a cascade), the merges-
+    // alone realisation is made here, in the draw — which draw ends nearest is only known
+    // once both are realised. (One with all K regions is realised so only if kept.)
+    let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
+        let sub = with_seed(seed);
+        let part = partition(mesh, &surface, &sub, &smoothed, progress);
+        let (out, made) = match realise(mesh, &surface, &sub, &smoothed, &part, true, progress) {
+            Err(ApproxError::Unrealisable(_)) => (
+                realise(mesh, &surface, &sub, &smoothed, &part, false, progress),
+                2,
+            ),
             Ok(o) if o.report.regions_dissolved > 0 && o.report.k_obtained < sub.k => {
-                match realised(false, progress) {
-                    Ok(m) if key(&m) < key(&o) => (Ok(m), 2),
-                    Ok(_) | Err(ApproxError::Unrealisable(_)) => (Ok(o), 2),
-                    Err(e) => (Err(e), 2),
-                }
+                (nearer_with_merges_alone(o, &part, progress), 2)
             }
             out => (out, 1),
         };
@@ -444,18 +453,14 @@ fn best_run(
     }
     // The kept realisation, if it gave regions away with all K regions left, realised with
     // merges alone too.
-    if let Some((b, part)) = best
-        .as_mut()
-        .filter(|b| b.0.report.regions_dissolved > 0 && b.0.report.k_obtained == opts.k)
-    {
-        let mut sub = opts.clone();
-        sub.seed = b.report.seed_used;
-        runs += 1;
-        match realise(mesh, &surface, &sub, &smoothed, part, false, progress) {
-            Ok(out) if key(&out) < key(b) => *b = out,
-            Ok(_) | Err(ApproxError::Unrealisable(_)) => {}
-            Err(e) => return Err(e),
-        }
+    if let Some((b, part)) = best.take() {
+        let b = if b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k {
+            runs += 1;
+            nearer_with_merges_alone(b, &part, progress)?
+        } else {
+            b
+        };
+        best = Some((b, part));
     }
     let Some((mut best, _)) = best else {
         let why = match unrealised {
