@@ -18,7 +18,10 @@
 //!    are where the planes meet, each region's polygon (holes allowed) is its outline through
 //!    those corners, triangulated in its plane ([`polygons`]), and the triangles of different
 //!    polygons must not cross ([`intersect`]). Where the planes cannot realise the partition,
-//!    the partition is split, merged or has faces moved — never the positions.
+//!    the partition is split, merged or has faces moved — never the positions;
+//! 5. [`refit`]: each plane moved to the one nearest the region's input vertices (least
+//!    absolute distances, the error the run reports) where the polygons built on them stay
+//!    valid.
 //!
 //! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the valid polygon mesh
 //! nearest the input is kept. OUT.obj is the triangulation of the polygons: the connectivity
@@ -629,6 +632,140 @@ fn partition(
     }
 }
 
+/// Stage 5: the planes fitted to the error the run is measured by. A region's least-squares
+/// plane minimises the squared distance integrated over its faces; the headline error is the
+/// mean absolute distance of the input *vertices* ([`input_distances`]), which over a fixed
+/// partition is a sum of one term per region — `Σ w_v |n·p_v + d|` over the region's vertices,
+/// `w_v` = 1 / the number of regions at `v` — so each region's least-absolute-distances plane
+/// ([`geom::l1_plane`]) is the best plane for it. The two differ where the region is curved
+/// (the median of the distances is not their mean) or its vertices are unevenly spread
+/// (fillets and refined strips of CAD meshes weigh per vertex, not per area).
+///
+/// New planes move the corners, so the polygon mesh is built again from them; the regions
+/// named by a fault go back halfway towards their least-squares plane (then all the way) and
+/// the mesh is built again, so at most three builds per region. The result is kept only if
+/// it is valid and nearer the input: never worse than the realisation it started from.
+fn refit(
+    surface: &outline::Surface<'_>,
+    pos: &[V3],
+    regions_at: &[Vec<u32>],
+    r: &mut outline::Realised,
+    diag: f64,
+) {
+    let n = r.planes.len();
+    let mut members: Vec<Vec<(V3, f64)>> = vec![Vec::new(); n];
+    for (v, cs) in regions_at.iter().enumerate() {
+        for &c in cs {
+            members[c as usize].push((pos[v], 1.0 / cs.len() as f64));
+        }
+    }
+    // Distances below this are zero at the output's precision (see `geom::l1_plane`).
+    let floor = 1e-9 * diag;
+    let l1: Vec<Plane> = members
+        .iter()
+        .zip(&r.planes)
+        .map(|(m, &p)| geom::l1_plane(m, p, floor))
+        .collect();
+    // Share of the way from the least-squares plane to the least-absolute-distances one.
+    let mut t = vec![1.0f64; n];
+    let mut builds = 0;
+    loop {
+        builds += 1;
+        let planes: Vec<Plane> = r
+            .planes
+            .iter()
+            .zip(&l1)
+            .zip(&t)
+            .map(|((a, b), &t)| geom::blend_planes(a, b, t))
+            .collect();
+        let built = outline::build(surface, &r.labels, &planes).map_err(|d| d.regions());
+        // The independent check of the output, too: a corner moved onto its neighbour's line
+        // can leave a triangle without area that the construction does not name.
+        let built = built.and_then(|(polygons, triangles, triangle_region)| {
+            let bad = bad_triangles(
+                &polygons.positions,
+                &triangles,
+                &triangle_region,
+                &planes,
+                diag,
+            );
+            if bad.is_empty() {
+                Ok((polygons, triangles, triangle_region))
+            } else {
+                Err(bad.iter().map(|b| triangle_region[b.0]).collect())
+            }
+        });
+        match built {
+            Ok((polygons, triangles, triangle_region)) => {
+                let error = |p: &[Plane]| input_distances(pos, regions_at, p).0;
+                if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
+                    eprintln!(
+                        "approx: refit: mean distance {:.4e} → {:.4e}·diag (the L1 plane: {:.4e}), {builds} builds, {} of {n} regions at their L1 plane",
+                        error(&r.planes) / diag,
+                        error(&planes) / diag,
+                        error(&l1) / diag,
+                        t.iter().filter(|&&x| x == 1.0).count()
+                    );
+                }
+                if error(&planes) < error(&r.planes) {
+                    r.polygons = polygons;
+                    r.triangles = triangles;
+                    r.triangle_region = triangle_region;
+                    r.planes = planes;
+                }
+                return;
+            }
+            Err(named) => {
+                let mut moved = false;
+                for x in named {
+                    let t = &mut t[x as usize];
+                    if *t > 0.0 {
+                        *t = if *t == 1.0 { 0.5 } else { 0.0 };
+                        moved = true;
+                    }
+                }
+                if !moved {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// What the independent check finds wrong with an output triangle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Bad {
+    /// Its normal does not agree with its region's plane.
+    Flipped,
+    /// Its area is under 1e-12 × the squared bounding-box diagonal.
+    Degenerate,
+}
+
+/// The output triangles that are flipped or degenerate (index, what), counted from the
+/// positions alone — not from what the construction believes it made.
+fn bad_triangles(
+    positions: &[V3],
+    triangles: &[[u32; 3]],
+    triangle_region: &[u32],
+    planes: &[Plane],
+    diag: f64,
+) -> Vec<(usize, Bad)> {
+    let (normals, areas) = face_normals_areas(positions, triangles);
+    triangle_region
+        .iter()
+        .enumerate()
+        .filter_map(|(f, &reg)| {
+            if areas[f] <= 1e-12 * diag * diag {
+                Some((f, Bad::Degenerate))
+            } else if dot(normals[f], planes[reg as usize].n) <= 0.0 {
+                Some((f, Bad::Flipped))
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
 /// The headline error: the mean over input vertices of their distance to their regions'
 /// planes (a vertex on several regions counts the mean over them), and the largest.
 fn input_distances(pos: &[V3], regions_at: &[Vec<u32>], planes: &[Plane]) -> (f64, f64) {
@@ -669,8 +806,10 @@ fn realise(
             part.error / diag
         );
     }
-    let r = outline::realise(surface, part.labels.clone(), part.n, opts.k, give_away)
+    let mut r = outline::realise(surface, part.labels.clone(), part.n, opts.k, give_away)
         .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
+    let vc = cluster::vertex_clusters(surface.topo, &r.labels);
+    refit(surface, &mesh.positions, &vc, &mut r, diag);
     let mut times = StageTimes {
         normals: smoothed.seconds_normals,
         vertices: smoothed.seconds_vertices,
@@ -689,15 +828,15 @@ fn realise(
         }
     }
     // The independent count of what the construction rules out.
-    let (n_out, a_out) = face_normals_areas(&r.polygons.positions, &r.triangles);
-    let (mut flipped, mut degenerate) = (0, 0);
-    for (f, &reg) in r.triangle_region.iter().enumerate() {
-        if a_out[f] <= 1e-12 * diag * diag {
-            degenerate += 1;
-        } else if dot(n_out[f], r.planes[reg as usize].n) <= 0.0 {
-            flipped += 1;
-        }
-    }
+    let bad = bad_triangles(
+        &r.polygons.positions,
+        &r.triangles,
+        &r.triangle_region,
+        &r.planes,
+        diag,
+    );
+    let flipped = bad.iter().filter(|b| b.1 == Bad::Flipped).count();
+    let degenerate = bad.len() - flipped;
     let mut notes = Vec::new();
     if r.merges > 0 {
         let given = if r.dissolved > 0 {
@@ -896,5 +1035,49 @@ pub(crate) mod testing {
         }
         let t = Topology::build(&m, Path::new("cube")).unwrap();
         (m, t, side_of)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    /// One region over a grid bent in x (`z = (x − ½)²`): its vertices' heights spread
+    /// unevenly (the median of `(x − ½)²` over a uniform x is 1/16, its mean 1/12), so the
+    /// least-absolute-distances plane is the level plane at the median height, nearer the
+    /// input than the least-squares one, and the polygon built on it is the whole border.
+    #[test]
+    fn refit_moves_a_curved_region_to_its_median_plane_and_keeps_the_mesh_valid() {
+        let (positions, faces) = crate::init::test_grid::bumpy(40, |x, _| (x - 0.5).powi(2));
+        let mesh = TriMesh { positions, faces };
+        let topo = Topology::build(&mesh, Path::new("generated")).unwrap();
+        let (normals, areas) = face_normals_areas(&mesh.positions, &mesh.faces);
+        let surface = outline::Surface::new(&topo, &mesh, &normals, &areas);
+        let mut r = outline::realise(&surface, vec![0; mesh.faces.len()], 1, 1, true).unwrap();
+        let at = cluster::vertex_clusters(&topo, &r.labels);
+        let before = input_distances(&mesh.positions, &at, &r.planes).0;
+        let diag = geom::bbox_diagonal(&mesh);
+        refit(&surface, &mesh.positions, &at, &mut r, diag);
+        let after = input_distances(&mesh.positions, &at, &r.planes).0;
+        assert!(after < 0.99 * before, "{before} → {after}");
+        // The level plane at the median height is the optimum; the refit plane is level and
+        // as near the input to half a per cent (IRLS converges linearly on a sum this flat
+        // near its minimum: its slope there is one vertex column's weight).
+        let mut z: Vec<f64> = mesh.positions.iter().map(|p| p[2]).collect();
+        z.sort_by(f64::total_cmp);
+        let median = z[z.len() / 2];
+        let p = r.planes[0];
+        assert!(p.n[2].abs() > 1.0 - 1e-9, "{p:?}");
+        let best: f64 = z.iter().map(|h| (h - median).abs()).sum::<f64>() / z.len() as f64;
+        assert!(
+            after <= 1.005 * best,
+            "{after} vs {best} at the median {median}: {p:?}"
+        );
+        // The polygon is rebuilt on the new plane: its corners lie on it.
+        for c in &r.polygons.positions {
+            assert!(p.signed_distance(*c).abs() < 1e-12);
+        }
+        assert_eq!(r.polygons.polygons.len(), 1);
     }
 }
