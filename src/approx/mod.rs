@@ -19,7 +19,7 @@
 //!    those corners, triangulated in its plane ([`polygons`]), and the triangles of different
 //!    polygons must not cross ([`intersect`]). Where the planes cannot realise the partition,
 //!    the partition is split, merged or has faces moved — never the positions;
-//! 5. [`refit`]: each plane moved to the one nearest the region's input vertices (least
+//! 5. `refit`: each plane moved to the one nearest the region's input vertices (least
 //!    absolute distances, the error the run reports) where the polygons built on them stay
 //!    valid.
 //!
@@ -642,9 +642,11 @@ fn partition(
 /// (fillets and refined strips of CAD meshes weigh per vertex, not per area).
 ///
 /// New planes move the corners, so the polygon mesh is built again from them; the regions
-/// named by a fault go back halfway towards their least-squares plane (then all the way) and
-/// the mesh is built again, so at most three builds per region. The result is kept only if
-/// it is valid and nearer the input: never worse than the realisation it started from.
+/// named by a fault (or owning a triangle the independent check finds flipped or degenerate)
+/// go back halfway towards their least-squares plane, then to a quarter of the way, then all
+/// the way, and the mesh is built again: at most 3 × regions + 1 builds. The result is kept
+/// only if it is valid and nearer the input: never worse than the realisation it started
+/// from.
 fn refit(
     surface: &outline::Surface<'_>,
     pos: &[V3],
@@ -679,8 +681,8 @@ fn refit(
             .map(|((a, b), &t)| geom::blend_planes(a, b, t))
             .collect();
         let built = outline::build(surface, &r.labels, &planes).map_err(|d| d.regions());
-        // The independent check of the output, too: a corner moved onto its neighbour's line
-        // can leave a triangle without area that the construction does not name.
+        // The independent check of the output, too: new planes can leave a triangle without
+        // area that the construction does not test for (seen on a CAD blade).
         let built = built.and_then(|(polygons, triangles, triangle_region)| {
             let bad = bad_triangles(
                 &polygons.positions,
@@ -720,7 +722,8 @@ fn refit(
                 for x in named {
                     let t = &mut t[x as usize];
                     if *t > 0.0 {
-                        *t = if *t == 1.0 { 0.5 } else { 0.0 };
+                        // 1 → ½ → ¼ → 0.
+                        *t = if *t > 0.3 { 0.5 * *t } else { 0.0 };
                         moved = true;
                     }
                 }
