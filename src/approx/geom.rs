@@ -98,13 +98,13 @@ pub fn fit_plane(points: impl Iterator<Item = (V3, f64)> + Clone, orient: V3) ->
 /// oriented like `start`, by iteratively reweighted least squares from `start`: each round
 /// fits the least-squares plane with weights `w / |r|` at the last residuals `r`, which
 /// majorises the absolute value (`|x| ≤ x²/2|r| + |r|/2`, equal at `x = r`) and is minimised
-/// exactly by [`fit_plane`], so no round increases the sum (Weiszfeld's argument). Residuals
-/// are floored at `floor` (a point on the plane would get an infinite weight); the best plane
-/// met is returned, `start` if no round improves on it.
+/// exactly by [`fit_plane`], so no round increases the sum (Weiszfeld's argument) — up to the
+/// floor: residuals are floored at `floor` (a point on the plane would get an infinite
+/// weight), so the best plane met is returned, `start` if no round improves on it.
 pub fn l1_plane(points: &[(V3, f64)], start: Plane, floor: f64) -> Plane {
     /// Rounds: each costs one pass over the points and a 3×3 eigenproblem. IRLS converges
     /// linearly; after 20 rounds the whole mesh's error was within 0.1 % of 100 rounds'
-    /// (fandisk_large and elk at K 60, BENCHMARKS.md round 15).
+    /// (two corpus meshes at K 60, BENCHMARKS.md round 15).
     const ROUNDS: usize = 20;
     let cost = |p: &Plane| -> f64 {
         points

@@ -682,7 +682,7 @@ fn refit(
             .collect();
         let built = outline::build(surface, &r.labels, &planes).map_err(|d| d.regions());
         // The independent check of the output, too: new planes can leave a triangle without
-        // area that the construction does not test for (seen on a CAD blade).
+        // area that the construction does not test for (seen in the corpus sweep).
         let built = built.and_then(|(polygons, triangles, triangle_region)| {
             let bad = bad_triangles(
                 &polygons.positions,
