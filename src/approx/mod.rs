@@ -228,7 +228,8 @@ pub struct ApproxReport {
     pub mean_input_distance: f64,
     pub mean_input_distance_rel: f64,
     /// The same for the partition as clustered (before the realisation changed it), each
-    /// region on its least-squares plane: what the realisation started from.
+    /// region on its least-absolute-distances plane, as the output's (stage 5): what the
+    /// realisation started from.
     pub partition_mean_input_distance: f64,
     pub max_input_distance: f64,
     pub max_input_distance_rel: f64,
@@ -543,8 +544,9 @@ fn smooth(
 struct Partitioned {
     labels: Vec<u32>,
     n: usize,
-    /// Mean distance of the input to the regions' least-squares planes: the error the
-    /// realisation starts from (a VSA-like partition, before any defect changed it).
+    /// Mean distance of the input to the regions' least-absolute-distances planes (as the
+    /// realised mesh's after `refit`): the error the realisation starts from (a VSA-like
+    /// partition, before any defect changed it).
     error: f64,
     facts: PartitionFacts,
     seconds: f64,
@@ -607,13 +609,14 @@ fn partition(
     let collapse_merges = cluster::merge_collapsing_regions(topo, &mut labels, n0, a0);
     let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut labels);
     let n = renumber(&mut labels);
-    let planes = outline::fit_planes(surface, &labels, n);
-    let error = input_distances(
+    let at = cluster::vertex_clusters(topo, &labels);
+    let planes = l1_planes(
         &mesh.positions,
-        &cluster::vertex_clusters(topo, &labels),
-        &planes,
-    )
-    .0;
+        &at,
+        &outline::fit_planes(surface, &labels, n),
+        diag,
+    );
+    let error = input_distances(&mesh.positions, &at, &planes).0;
     Partitioned {
         labels,
         n,
@@ -655,19 +658,7 @@ fn refit(
     diag: f64,
 ) {
     let n = r.planes.len();
-    let mut members: Vec<Vec<(V3, f64)>> = vec![Vec::new(); n];
-    for (v, cs) in regions_at.iter().enumerate() {
-        for &c in cs {
-            members[c as usize].push((pos[v], 1.0 / cs.len() as f64));
-        }
-    }
-    // Distances below this are zero at the output's precision (see `geom::l1_plane`).
-    let floor = 1e-9 * diag;
-    let l1: Vec<Plane> = members
-        .iter()
-        .zip(&r.planes)
-        .map(|(m, &p)| geom::l1_plane(m, p, floor))
-        .collect();
+    let l1 = l1_planes(pos, regions_at, &r.planes, diag);
     // Share of the way from the least-squares plane to the least-absolute-distances one.
     let mut t = vec![1.0f64; n];
     let mut builds = 0;
@@ -733,6 +724,25 @@ fn refit(
             }
         }
     }
+}
+
+/// Each region's least-absolute-distances plane ([`geom::l1_plane`]) of its input vertices,
+/// a vertex on `m` regions weighing `1/m` in each (so the sum over regions is the headline
+/// error, [`input_distances`]), from its plane in `start`.
+fn l1_planes(pos: &[V3], regions_at: &[Vec<u32>], start: &[Plane], diag: f64) -> Vec<Plane> {
+    let mut members: Vec<Vec<(V3, f64)>> = vec![Vec::new(); start.len()];
+    for (v, cs) in regions_at.iter().enumerate() {
+        for &c in cs {
+            members[c as usize].push((pos[v], 1.0 / cs.len() as f64));
+        }
+    }
+    // Distances below this are zero at the output's precision (see `geom::l1_plane`).
+    let floor = 1e-9 * diag;
+    members
+        .iter()
+        .zip(start)
+        .map(|(m, &p)| geom::l1_plane(m, p, floor))
+        .collect()
 }
 
 /// What the independent check finds wrong with an output triangle.
