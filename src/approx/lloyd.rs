@@ -291,15 +291,10 @@ mod tests {
         let mut cycled = 0;
         for trial in 0..40u64 {
             let (mut m, topo) = crate::approx::testing::grid(12);
-            // Deterministic noise in z (a linear congruential sequence per trial).
-            let mut x = trial
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            // Deterministic noise in z, one stream per trial.
+            let mut rng = crate::linalg::rng::SplitMix(trial);
             for p in &mut m.positions {
-                x = x
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                p[2] = ((x >> 33) as f64 / (1u64 << 31) as f64 - 0.5) * 0.8;
+                p[2] = 0.4 * rng.symmetric();
             }
             let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
             let start: Vec<u32> = (0..m.faces.len())

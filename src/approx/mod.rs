@@ -691,16 +691,17 @@ fn refit(
         match built {
             Ok((polygons, triangles, triangle_region)) => {
                 let error = |p: &[Plane]| input_distances(pos, regions_at, p).0;
+                let (before, after) = (error(&r.planes), error(&planes));
                 if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
                     eprintln!(
                         "approx: refit: mean distance {:.4e} → {:.4e}·diag (the L1 plane: {:.4e}), {builds} builds, {} of {n} regions at their L1 plane",
-                        error(&r.planes) / diag,
-                        error(&planes) / diag,
+                        before / diag,
+                        after / diag,
                         error(&l1) / diag,
                         t.iter().filter(|&&x| x == 1.0).count()
                     );
                 }
-                if error(&planes) < error(&r.planes) {
+                if after < before {
                     r.polygons = polygons;
                     r.triangles = triangles;
                     r.triangle_region = triangle_region;
@@ -831,7 +832,6 @@ fn realise(
         total: 0.0,
     };
     times.total = times.normals + times.vertices + times.cluster + times.polygons;
-    let vc = cluster::vertex_clusters(surface.topo, &r.labels);
     let (mean, maxd) = input_distances(&mesh.positions, &vc, &r.planes);
     let mut maxp = 0.0f64;
     for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
