@@ -18,7 +18,9 @@ The harness does not trust the report: it re-reads the written MEDIT file and co
 det ≤ 0 against the rest mesh's orientation (`check_inverted`), the largest |‖x‖ − 1| over the
 boundary vertices (`check_sphere`, ball), and ρ = Σ‖x_v − target_v‖² over the constraints file or
 the init's boundary (`check_rho`). A run passes iff it exits 0, writes the map, check_inverted is 0,
-check_rho ≤ 1e-6 and (ball) check_sphere ≤ 1e-9. A run that exits 2 is `refused` (bad input, e.g.
+check_rho ≤ 1e-6 and (ball) check_sphere ≤ 1e-9. Where the ball target split chords (the report's
+`sphere_sliding.splits`), the harness applies those splits to the rest's tets itself and requires
+the written tets to be exactly that refinement. A run that exits 2 is `refused` (bad input, e.g.
 a ball target for a boundary of genus > 0) and is neither a pass nor a silent failure; every
 other outcome fails.
 """
@@ -93,11 +95,27 @@ def read_constraints(path):
     return out
 
 
-def check_map(rest, out, case, constraints=None, init=None):
+def refine(tets, splits):
+    """The rest tets after the ball target's chord splits ([m, a, b] in order: every tet on
+    edge a–b replaced by its halves, b → m in place and a → m appended), re-done here from
+    the report so the written tets are checked against the rest, not against themselves."""
+    tets = list(tets)
+    for m, a, b in splits:
+        for i in range(len(tets)):
+            t = tets[i]
+            if a in t and b in t:
+                tets[i] = tuple(m if v == b else v for v in t)
+                tets.append(tuple(m if v == a else v for v in t))
+    return tets
+
+
+def check_map(rest, out, case, constraints=None, init=None, splits=()):
     rp, rt = read_medit(rest)
     xp, xt = read_medit(out)
-    if len(xp) != len(rp) or xt != rt:
-        raise ValueError("the written map does not have the rest mesh's vertices and tets")
+    rt = refine(rt, splits)
+    if len(xp) != len(rp) + len(splits) or xt != rt:
+        raise ValueError("the written map does not have the rest mesh's vertices and tets"
+                         + (f" (refined by the report's {len(splits)} splits)" if splits else ""))
     row = {"check_inverted": sum(1 for t in rt if not det6(xp, t) > 0.0)}
     if case == "ball":
         row["check_sphere"] = max(abs(math.sqrt(sum(c * c for c in xp[v])) - 1.0)
@@ -179,12 +197,15 @@ class VolSweep:
                     "constraints_met": report.get("constraints_met"),
                     "phases": [(p.get("name"), p.get("iterations"), round(p.get("seconds") or 0, 3))
                                for p in report.get("phases") or []]})
+        row["splits"] = (report.get("sphere_sliding") or {}).get("splits") or []
+        row["n_splits"] = len(row["splits"])
         row["error"] = last_error_line(log) if code != 0 else None
         if row["written"]:
             try:
                 row.update(check_map(rest, outp, case,
                                      constraints=cons if case != "fix" and cons.exists() else None,
-                                     init=init if case == "fix" else None))
+                                     init=init if case == "fix" else None,
+                                     splits=row["splits"]))
             except (OSError, ValueError, IndexError) as e:
                 row["check_error"] = f"{type(e).__name__}: {e}"
         row["pass"] = bool(code == 0 and row["written"] and row.get("check_inverted") == 0
@@ -233,7 +254,7 @@ def write_table(out):
     cols = [("mesh", "name", ""), ("case", "case", ""), ("tets", "tets", ""), ("exit", "exit", ""),
             ("outcome", "outcome", ""), ("inverted (check)", "check_inverted", ""), ("ρ (check)", "check_rho", "e"),
             ("sphere dev. (check)", "check_sphere", "e"), ("δ_t", "delta_t", "g"), ("init inverted", "inverted_init", ""),
-            ("s (report)", "seconds", "s"), ("wall s", "wall_s", "s")]
+            ("edges split", "n_splits", ""), ("s (report)", "seconds", "s"), ("wall s", "wall_s", "s")]
     md += ["", "## Runs", "", "| " + " | ".join(c for c, _, _ in cols) + " |", "|" + "---|" * len(cols)]
     for r in sorted(rows, key=lambda r: (r["name"], r["case"])):
         md.append("| " + " | ".join(("timeout" if k == "exit" and r.get("timeout") else fmt(r.get(k), kind))

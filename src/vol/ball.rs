@@ -4,8 +4,10 @@
 //! The spherical embedding is built coarse to fine ([`super::progressive`]), so no protrusion
 //! is crowded below the resolution of the coordinates, and relaxed on the sphere
 //! ([`relax_on_sphere`]); a Tutte/stereographic embedding is the fallback should the
-//! progressive one run out of resolution.
+//! progressive one run out of resolution. Where the untangler finds no room for a few tets,
+//! the mesh is refined there ([`slide_on_sphere`]: interior edges split, the surface kept).
 
+use std::collections::HashSet;
 use std::path::Path;
 
 use super::energy::IDENTITY;
@@ -379,6 +381,23 @@ pub struct SlideReport {
     pub relax_seconds: f64,
     /// δ_t of the untangled map, before the relaxation.
     pub delta_t_before_relax: Option<f64>,
+    /// Interior edges split where the untangler left tets inverted, in order, as
+    /// `[new vertex, a, b]`: the new vertex is appended, its rest position the midpoint of
+    /// `a` and `b`, and every tet on the edge replaced by its halves
+    /// ([`TetMesh::split_edges`]); empty: the output has the input's vertices and tets.
+    pub splits: Vec<[u32; 3]>,
+}
+
+/// What [`slide_on_sphere`] returns.
+#[derive(Clone, Debug)]
+pub struct Slid {
+    /// The mesh the map is of: the input, or the input refined (vertices and tets appended,
+    /// see [`SlideReport::splits`]).
+    pub mesh: TetMesh,
+    pub map: Vec<[f64; 3]>,
+    /// Where the boundary vertices ended: the constraints the map meets exactly.
+    pub targets: Targets,
+    pub report: SlideReport,
 }
 
 /// Largest |‖x‖ − 1| over the boundary vertices of `x`: 0 up to rounding when the boundary
@@ -392,8 +411,14 @@ pub fn sphere_deviation(mesh: &TetMesh, x: &[[f64; 3]]) -> f64 {
 
 /// Untangles a start map of the ball target with the boundary vertices sliding on the unit
 /// sphere (interior free), from `start` with its boundary put on the sphere targets first.
-/// Returns the map and its boundary positions — the constraints of the rest of the pipeline,
-/// which it meets exactly — when no tet is left inverted.
+/// Returns the mesh the map is of, the map and its boundary positions — the constraints of
+/// the rest of the pipeline, which it meets exactly — when no tet is left inverted
+/// ([`Slid`]).
+///
+/// Where the sliding untangler stalls, up to `refine_rounds` rounds split interior edges
+/// next to the folds ([`TetMesh::split_edges`], [`SlideReport::splits`]); the returned mesh is
+/// then `mesh` refined (vertices and tets appended, the boundary surface unchanged), else
+/// `mesh` itself.
 ///
 /// Why: a fixed spherical embedding can invert tets whose four corners are all boundary
 /// vertices (tets spanning a thin protrusion, placed by the surface embedding alone), and then
@@ -406,46 +431,129 @@ pub fn slide_on_sphere(
     targets: &Targets,
     opts: &UntangleOptions,
     relax: Option<&NewtonOptions>,
+    refine_rounds: usize,
     device: Option<&crate::gpu::Context>,
-) -> Result<(Vec<[f64; 3]>, Targets, SlideReport), VolError> {
+) -> Result<Slid, VolError> {
     let mut x = start.to_vec();
     let mut on_sphere = vec![false; x.len()];
     for (v, p) in targets {
         x[*v as usize] = *p;
         on_sphere[*v as usize] = true;
     }
-    let fixed = vec![false; x.len()];
     let inverted_start = mesh.inverted(&x).len();
-    // Tets with three or four boundary corners that are positive at the start keep the
-    // barrier of the untangling energy's ε → 0 limit: sliding spreads the boundary where the interior needs room,
-    // and without the barrier it also flattens such tets through zero (a tet with four
-    // corners on the sphere, or three and an interior corner in the thin lens under a small
-    // cap, has no interior side to escape to), after which no ε brings them back.
-    let protect: Vec<bool> = mesh
-        .tets
-        .iter()
-        .map(|t| t.iter().filter(|&&v| on_sphere[v as usize]).count() >= 3)
-        .collect();
-    let s = untangle_sliding_protected(mesh, &mut x, &fixed, &on_sphere, &protect, opts, device)?;
-    if trace() && s.inverted > 0 {
-        let mut by = [0usize; 5];
-        for t in mesh.inverted(&x) {
-            by[mesh.tets[t]
+    let boundary_edges = boundary_edges(mesh);
+    let mut mesh = mesh.clone();
+    let mut splits = Vec::new();
+    let (mut iterations, mut outer, mut seconds) = (0, 0, 0.0);
+    let mut untangle =
+        |mesh: &TetMesh, x: &mut [[f64; 3]], on_sphere: &[bool], sliding: bool, full: bool| {
+            // Tets with three or four boundary corners that are positive at the start keep the
+            // barrier of the untangling energy's ε → 0 limit: sliding spreads the boundary where
+            // the interior needs room, and without the barrier it also flattens such tets through
+            // zero (a tet with four corners on the sphere, or three and an interior corner in the
+            // thin lens under a small cap, has no interior side to escape to), after which no ε
+            // brings them back.
+            let protect: Vec<bool> = mesh
+                .tets
                 .iter()
-                .filter(|&&v| on_sphere[v as usize])
-                .count()] += 1;
+                .map(|t| t.iter().filter(|&&v| on_sphere[v as usize]).count() >= 3)
+                .collect();
+            let fixed = if sliding {
+                vec![false; x.len()]
+            } else {
+                on_sphere.to_vec()
+            };
+            // The fixed-boundary pass runs its whole ε schedule (no stall test): the tets it
+            // leaves are the ones refined, so it should leave only those with no room.
+            let o = UntangleOptions {
+                stall_decades: if sliding && !full {
+                    opts.stall_decades
+                } else {
+                    f64::INFINITY
+                },
+                ..*opts
+            };
+            let s = untangle_sliding_protected(mesh, x, &fixed, on_sphere, &protect, &o, device)?;
+            (iterations, outer, seconds) = (
+                iterations + s.iterations,
+                outer + s.outer,
+                seconds + s.seconds,
+            );
+            if trace() && s.inverted > 0 {
+                let mut by = [0usize; 5];
+                for t in mesh.inverted(x) {
+                    by[mesh.tets[t]
+                        .iter()
+                        .filter(|&&v| on_sphere[v as usize])
+                        .count()] += 1;
+                }
+                eprintln!(
+                    "ball: the {} untangler left {} inverted tet(s); by boundary corners {by:?}",
+                    if sliding { "sliding" } else { "fixed-boundary" },
+                    s.inverted
+                );
+            }
+            Ok::<_, VolError>(s)
+        };
+    let (input, x_start) = (mesh.clone(), x.clone());
+    let mut s = untangle(&mesh, &mut x, &on_sphere, true, false)?;
+    // Where the sliding untangler stalls, refine where the sphere leaves no room: the
+    // interior edges of the tets it left inverted are split, and it goes on from there. When
+    // a round does not reduce the folds (the sliding boundary can crush a boundary edge next
+    // to a fold, measured 1/240 of its neighbours, and interior splits then only chase the
+    // fold towards it), the refinement starts again from the input: the untangler with the
+    // boundary fixed on the embedding, which cannot push a fold onto the surface, runs its
+    // whole ε schedule, the interior edges of the tets it leaves inverted are split, and the
+    // sliding untangler goes on from that result. Each round splits at least one edge and
+    // the restart happens once, so the rounds end; their cap is a time budget (each is
+    // another untangling).
+    let (mut last, mut restarted) = (usize::MAX, false);
+    for round in 0..refine_rounds {
+        if s.inverted == 0 {
+            break;
         }
-        eprintln!(
-            "ball: the sliding untangler left {} inverted tet(s); by boundary corners {by:?}",
-            s.inverted
-        );
+        if s.inverted >= last && !restarted {
+            // Splits next to the folds did not reduce them: start again from the input and
+            // the start map, and let the untangler with the boundary fixed name the tets.
+            restarted = true;
+            mesh.clone_from(&input);
+            x.clone_from(&x_start);
+            on_sphere.truncate(x.len());
+            splits.clear();
+            let f = untangle(&mesh, &mut x, &on_sphere, false, true)?;
+            if f.inverted == 0 {
+                s = f;
+                break;
+            }
+        }
+        last = s.inverted;
+        let edges = edges_to_split(&mesh, &mesh.inverted(&x), &boundary_edges);
+        if edges.is_empty() {
+            break;
+        }
+        let done = mesh.split_edges(&edges, &mut [&mut x]);
+        if trace() {
+            eprintln!(
+                "ball: refinement round {round}: {} edge(s) split",
+                done.len()
+            );
+        }
+        on_sphere.resize(x.len(), false);
+        splits.extend(done);
+        s = untangle(&mesh, &mut x, &on_sphere, true, false)?;
+    }
+    if s.inverted > 0 {
+        // Nothing (more) to refine: the stall test only hands over to refinement, so where
+        // there is none the sliding untangler runs its whole ε schedule from here.
+        s = untangle(&mesh, &mut x, &on_sphere, true, true)?;
     }
     let mut report = SlideReport {
         inverted_start,
         inverted_left: s.inverted,
-        iterations: s.iterations,
-        eps_updates: s.outer,
-        seconds: s.seconds,
+        iterations,
+        eps_updates: outer,
+        seconds,
+        splits,
         relax_iterations: 0,
         relax_seconds: 0.0,
         delta_t_before_relax: None,
@@ -454,12 +562,17 @@ pub fn slide_on_sphere(
     // fold-free map, whose tets at the tips of protrusions are squeezed on the sphere.
     if let (Some(nopts), 0) = (relax, s.inverted) {
         let t0 = Instant::now();
-        let obj = distortion_objective(mesh, fixed, on_sphere)?;
+        let obj = distortion_objective(&mesh, vec![false; x.len()], on_sphere.clone())?;
         if !obj.value(&x).is_finite() {
             // The untangler's last ε left a tet positive by its own test but with a
             // distortion that overflows: keep the untangled map unrelaxed.
-            let slid = targets.iter().map(|(v, _)| (*v, x[*v as usize])).collect();
-            return Ok((x, slid, report));
+            let targets = targets.iter().map(|(v, _)| (*v, x[*v as usize])).collect();
+            return Ok(Slid {
+                mesh,
+                map: x,
+                targets,
+                report,
+            });
         }
         let pattern = Pattern::new(x.len(), &mesh.tets);
         report.delta_t_before_relax = Some(obj.tet_energy(&x));
@@ -467,6 +580,90 @@ pub fn slide_on_sphere(
         report.relax_iterations = st.iterations;
         report.relax_seconds = t0.elapsed().as_secs_f64();
     }
-    let slid = targets.iter().map(|(v, _)| (*v, x[*v as usize])).collect();
-    Ok((x, slid, report))
+    let targets = targets.iter().map(|(v, _)| (*v, x[*v as usize])).collect();
+    Ok(Slid {
+        mesh,
+        map: x,
+        targets,
+        report,
+    })
+}
+
+/// The edges of the boundary surface, each as `[min, max]`.
+fn boundary_edges(mesh: &TetMesh) -> HashSet<[u32; 2]> {
+    mesh.boundary_faces()
+        .iter()
+        .flat_map(|f| [[f[0], f[1]], [f[1], f[2]], [f[2], f[0]]])
+        .map(|[a, b]| [a.min(b), a.max(b)])
+        .collect()
+}
+
+/// The edges of the tets `near` that are not on the boundary surface, each once, ascending.
+///
+/// Why these: the untangler stalls with a few tets whose det tends to 0⁻ while ε shrinks,
+/// the signature of a configuration with no room rather than a slow one. The tightest is a
+/// chord (an interior edge with both ends on the sphere): its ends are pinned to the sphere,
+/// and every tet around it must fit between the segment and the sphere, a lens of depth
+/// ~ℓ²/8 for a chord of length ℓ. Split at its midpoint, an interior edge becomes two with
+/// a free end, and every tet on it two halves with a free corner: refinement adds room where
+/// the untangler found none, and (a map of a fine enough subdivision exists for any
+/// homeomorphism) enough of it always does. Boundary edges are never split: the surface and
+/// the constraints stay the input's (splitting them was tried: the folds next to a crushed
+/// boundary edge only doubled). Only tets the untangler left inverted are refined, so a mesh
+/// that maps without it is unchanged.
+fn edges_to_split(
+    mesh: &TetMesh,
+    near: &[usize],
+    boundary_edges: &HashSet<[u32; 2]>,
+) -> Vec<[u32; 2]> {
+    let mut out: Vec<[u32; 2]> = near
+        .iter()
+        .flat_map(|&t| {
+            let t = mesh.tets[t];
+            [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+                .map(|(i, j)| [t[i].min(t[j]), t[i].max(t[j])])
+        })
+        .filter(|e| !boundary_edges.contains(e))
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three tets around the axis 3–4 of a triangular bipyramid (all five vertices on the
+    /// boundary, the axis a chord), one of them inverted in `x`.
+    #[test]
+    fn refinement_splits_interior_edges_of_the_folds_never_boundary_ones() {
+        let mut m = TetMesh::new(
+            vec![
+                [1., 0., 0.],
+                [-0.5, 0.8, 0.],
+                [-0.5, -0.8, 0.],
+                [0., 0., 1.],
+                [0., 0., -1.],
+            ],
+            vec![[3, 4, 1, 0], [3, 4, 2, 1], [3, 4, 0, 2]],
+        );
+        let be = boundary_edges(&m);
+        assert_eq!(be.len(), 9);
+        assert!(!be.contains(&[3, 4]));
+        let mut x = m.positions.clone();
+        // The axis moved off the equator triangle past edge 0–1: tet 0 folds.
+        x[4] = [0.6, 0.6, -0.5];
+        let folds = m.inverted(&x);
+        assert_eq!(folds, vec![0]);
+        let edges = edges_to_split(&m, &folds, &be);
+        assert_eq!(edges, vec![[3, 4]]);
+        let done = m.split_edges(&edges, &mut [&mut x]);
+        assert_eq!(done, vec![[5, 3, 4]]);
+        // The same surface, and the new interior vertex gives the fold room: from a point
+        // the (star-shaped) boundary is seen from, every tet is positive.
+        assert_eq!(boundary_edges(&m), be);
+        x[5] = [-0.1, -0.1, 0.1];
+        assert!(m.inverted(&x).is_empty(), "{:?}", m.inverted(&x));
+    }
 }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use super::ball::{ball_target, slide_on_sphere, SlideReport};
+use super::ball::{ball_target, slide_on_sphere, Slid, SlideReport};
 use super::constraints::{constraints_text, read_constraints};
 use super::harmonic::harmonic_extension;
 use super::tetgen::{
@@ -38,6 +38,9 @@ pub struct VolmapJob {
     pub report: Option<PathBuf>,
     /// Where to write the constraints the map meets (`vertex x y z`).
     pub write_constraints: Option<PathBuf>,
+    /// Where to write the rest mesh the map is of: the input, or the input refined where the
+    /// ball target split edges ([`SlideReport::splits`]), so `volcheck` can check the map.
+    pub write_rest: Option<PathBuf>,
     pub quiet: bool,
     /// Refuse meshes of more tets (and files larger than such a mesh's text).
     pub max_tets: usize,
@@ -84,7 +87,9 @@ pub fn read_rest(path: &Path, max_tets: usize) -> Result<TetMesh, VolError> {
 
 /// Reads a map of `rest` (same tets), returning its positions.
 pub fn read_map(rest: &TetMesh, rest_path: &Path, path: &Path) -> Result<Vec<[f64; 3]>, VolError> {
-    let m = read_any_with_limit(path, rest.tets.len())?;
+    // Twice the rest's tets: a file that large cannot be a map of it, but a map of it refined
+    // by the ball target still reads, and is then named as a map of another mesh.
+    let m = read_any_with_limit(path, rest.tets.len().saturating_mul(2))?;
     same_tets(rest, rest_path, &m, path)?;
     Ok(m.positions)
 }
@@ -93,7 +98,9 @@ pub fn read_map(rest: &TetMesh, rest_path: &Path, path: &Path) -> Result<Vec<[f6
 fn same_tets(rest: &TetMesh, rest_path: &Path, m: &TetMesh, path: &Path) -> Result<(), VolError> {
     if m.positions.len() != rest.positions.len() || m.tets != rest.tets {
         return Err(VolError::Input(format!(
-            "{}: not a map of {} ({} vertices / {} tets against {} / {}, or different tets)",
+            "{}: not a map of {} ({} vertices / {} tets against {} / {}, or different tets; a \
+             ball map refined where the untangler found no room is a map of the rest written \
+             with --write-rest)",
             path.display(),
             rest_path.display(),
             m.positions.len(),
@@ -163,7 +170,10 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     if let Some(p) = &job.write_constraints {
         outputs.output(p, "constraints", &[])?;
     }
-    let rest_file = read_rest(&job.rest, job.max_tets)?;
+    if let Some(p) = &job.write_rest {
+        tet_output(&mut outputs, p, "rest")?;
+    }
+    let mut rest_file = read_rest(&job.rest, job.max_tets)?;
     let ctx = crate::gpu::open_backend(job.backend, job.device.as_deref(), job.validation)?;
     let init_file = match &job.init {
         Some(p) => Some(read_map(&rest_file, &job.rest, p)?),
@@ -187,7 +197,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
         e => e,
     };
     let scaled = |p: &[[f64; 3]]| -> Vec<[f64; 3]> { p.iter().map(|&q| scale.apply(q)).collect() };
-    let rest = TetMesh {
+    let mut rest = TetMesh {
         positions: scaled(&rest_file.positions),
         ..rest_file.clone()
     };
@@ -202,20 +212,42 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
             let start = init_pos.unwrap_or(start);
             match &job.options.untangle {
                 Some(u) => {
-                    let (x, slid, s) = slide_on_sphere(
+                    let Slid {
+                        mesh: refined,
+                        map: x,
+                        targets: slid,
+                        report: mut s,
+                    } = slide_on_sphere(
                         &rest,
                         &start,
                         &t,
                         u,
                         job.options.ball_relax.as_ref(),
+                        job.options.ball_refine_rounds,
                         ctx.as_ref(),
                     )
                     .map_err(locate)?;
                     let ok = s.inverted_left == 0;
-                    sliding = Some(s);
                     if ok {
+                        // The chords split on the way are the output's: the rest refined
+                        // the same way (midpoints; appended vertices and tets).
+                        if !s.splits.is_empty() {
+                            rest_file = TetMesh {
+                                positions: refined
+                                    .positions
+                                    .iter()
+                                    .map(|&p| scale.invert(p))
+                                    .collect(),
+                                ..refined.clone()
+                            };
+                            rest = refined;
+                        }
+                        sliding = Some(s);
                         (x, slid)
                     } else {
+                        // The paper's phases go on from the start on the input's tets.
+                        s.splits.clear();
+                        sliding = Some(s);
                         (start, t)
                     }
                 }
@@ -307,6 +339,12 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
     for (f, t) in files_of(&job.output)?.iter().zip(texts) {
         outputs.set(f, t.into_bytes());
     }
+    if let Some(p) = &job.write_rest {
+        let texts = output_texts(p, &rest_file, &rest_file.positions)?;
+        for (f, t) in files_of(p)?.iter().zip(texts) {
+            outputs.set(f, t.into_bytes());
+        }
+    }
     let report = VolmapFileReport {
         rest: job.rest.display().to_string(),
         init: job.init.as_ref().map(|p| p.display().to_string()),
@@ -373,6 +411,16 @@ impl std::fmt::Display for VolmapFileReport {
                 "\n  {:<20} {:>4} it {:>6} ε   {:>7.2} s  inverted {} → {} (boundary sliding on the sphere)",
                 "ball untangle", s.iterations, s.eps_updates, s.seconds, s.inverted_start, s.inverted_left
             )?;
+            if let Some(&[first, ..]) = s.splits.first() {
+                write!(
+                    f,
+                    "\n  {:<20} {:>4} interior edge(s) split where the untangler found no room: vertices {first}–{} appended at edge midpoints, {} tets now (--write-rest writes the refined rest)",
+                    "ball refine",
+                    s.splits.len(),
+                    first as usize + s.splits.len() - 1,
+                    q.tets,
+                )?;
+            }
             if let Some(d) = s.delta_t_before_relax {
                 write!(
                     f,

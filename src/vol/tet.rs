@@ -162,6 +162,69 @@ impl TetMesh {
         out
     }
 
+    /// Splits each edge `[a, b]` at its midpoint, in order: a vertex is appended (reference 0)
+    /// at the midpoint of `a` and `b` in the positions and in each of `maps` (maps of this
+    /// mesh), and every tet on the edge is replaced by its two halves, `b → m` in place and
+    /// `a → m` appended, both with the parent's reference. Returns the edges split, as
+    /// `[m, a, b]`; an edge no tet has is skipped.
+    ///
+    /// A half has half its parent's signed volume in the positions and in every map (m is on
+    /// the segment ab, and the determinant is linear in each corner), so a positive rest
+    /// stays positive and a map's inverted tets are still inverted: a split adds freedom (the
+    /// new vertex), never a fold. The boundary surface is unchanged when the edges are
+    /// interior (no boundary face has an interior edge).
+    pub fn split_edges(
+        &mut self,
+        edges: &[[u32; 2]],
+        maps: &mut [&mut Vec<[f64; 3]>],
+    ) -> Vec<[u32; 3]> {
+        let mut inc: Vec<Vec<u32>> = vec![Vec::new(); self.positions.len()];
+        for (i, t) in self.tets.iter().enumerate() {
+            for &v in t {
+                inc[v as usize].push(i as u32);
+            }
+        }
+        let mid = |p: &[[f64; 3]], a: u32, b: u32| -> [f64; 3] {
+            let (pa, pb) = (p[a as usize], p[b as usize]);
+            [0, 1, 2].map(|k| 0.5 * (pa[k] + pb[k]))
+        };
+        let mut done = Vec::new();
+        for &[a, b] in edges {
+            let on: Vec<u32> = inc[a as usize]
+                .iter()
+                .copied()
+                .filter(|&t| self.tets[t as usize].contains(&b))
+                .collect();
+            if on.is_empty() || a == b {
+                continue;
+            }
+            let m = self.positions.len() as u32;
+            self.positions.push(mid(&self.positions, a, b));
+            for x in maps.iter_mut() {
+                let p = mid(x, a, b);
+                x.push(p);
+            }
+            self.vertex_refs.push(0);
+            inc.push(Vec::new());
+            for t in on {
+                let parent = self.tets[t as usize];
+                let new = self.tets.len() as u32;
+                self.tets[t as usize] = parent.map(|v| if v == b { m } else { v });
+                self.tets.push(parent.map(|v| if v == a { m } else { v }));
+                let r = self.tet_refs.get(t as usize).copied().unwrap_or(0);
+                self.tet_refs.push(r);
+                inc[b as usize].retain(|&s| s != t);
+                inc[b as usize].push(new);
+                inc[m as usize].extend([t, new]);
+                for &v in parent.iter().filter(|&&v| v != a && v != b) {
+                    inc[v as usize].push(new);
+                }
+            }
+            done.push([m, a, b]);
+        }
+        done
+    }
+
     /// Vertices on the boundary surface, ascending.
     pub fn boundary_vertices(&self) -> Vec<u32> {
         let mut on = vec![false; self.positions.len()];
@@ -235,5 +298,52 @@ mod tests {
             assert!(dot(n, sub(p(t[0]), c)) > 0.0);
         }
         assert_eq!(m.boundary_vertices(), vec![0, 1, 2, 3]);
+    }
+
+    /// Three tets around the axis 3–4 of a triangular bipyramid: the axis is an interior edge
+    /// whose two ends are on the boundary (a chord, once on the sphere).
+    fn bipyramid() -> TetMesh {
+        TetMesh::new(
+            vec![
+                [1., 0., 0.],
+                [-0.5, 0.8, 0.],
+                [-0.5, -0.8, 0.],
+                [0., 0., 1.],
+                [0., 0., -1.],
+            ],
+            vec![[3, 4, 1, 0], [3, 4, 2, 1], [3, 4, 0, 2]],
+        )
+    }
+
+    #[test]
+    fn split_edge_halves_every_tet_on_it_and_keeps_the_boundary() {
+        let mut m = bipyramid();
+        assert!(m.inverted(&m.positions).is_empty());
+        let before = m.boundary_faces();
+        let vol: f64 = (0..3).map(|t| m.volume_at(&m.positions, t)).sum();
+        // A map with one tet inverted: the halves of that tet stay inverted, no other is.
+        let mut x = m.positions.clone();
+        x[0] = [-0.2, 0.0, 0.0];
+        let inv = m.inverted(&x).len();
+        assert!(inv > 0);
+        let done = m.split_edges(&[[3, 4], [0, 1], [4, 3]], &mut [&mut x]);
+        // 3–4 split (vertex 5 at its midpoint); 0–1 is an edge of one tet now; 4–3 no more.
+        assert_eq!(done, vec![[5, 3, 4], [6, 0, 1]]);
+        assert_eq!(m.positions[5], [0.0, 0.0, 0.0]);
+        assert_eq!(x.len(), 7);
+        assert_eq!(m.tets.len(), 3 * 2 + 2);
+        assert_eq!(m.tet_refs.len(), m.tets.len());
+        assert_eq!(m.vertex_refs.len(), 7);
+        let after: f64 = (0..m.tets.len())
+            .map(|t| m.volume_at(&m.positions, t))
+            .sum();
+        assert!((after - vol).abs() < 1e-12 * vol);
+        assert!(m.inverted(&m.positions).is_empty());
+        // The surface is the same triangles, split where 0–1 was (a boundary edge here).
+        assert_eq!(before.len() + 2, m.boundary_faces().len());
+        assert!(m.inverted(&x).len() >= inv);
+        let mut m2 = bipyramid();
+        m2.split_edges(&[[3, 4]], &mut []);
+        assert_eq!(before, m2.boundary_faces());
     }
 }

@@ -68,6 +68,12 @@ pub struct VolmapOptions {
     /// budget.
     #[serde(with = "crate::tuning::phase")]
     pub sphere_relax: Option<NewtonOptions>,
+    /// `--target ball`: rounds of chord splits where the sliding untangler leaves tets
+    /// inverted (0: never refine; the run then ends with exit 3 if a tet stays inverted).
+    /// Each round splits at least one chord and there are finitely many, so the rounds end;
+    /// the cap is a time budget (each round is another untangling), see
+    /// [`super::ball::slide_on_sphere`].
+    pub ball_refine_rounds: usize,
 }
 
 impl Default for VolmapOptions {
@@ -94,6 +100,7 @@ impl Default for VolmapOptions {
                 ..NewtonOptions::default()
             }),
             sphere_relax: Some(NewtonOptions::default()),
+            ball_refine_rounds: 8,
         }
     }
 }
@@ -126,6 +133,13 @@ impl VolmapOptions {
         }
         if !(1..=1000).contains(&self.max_rounds) {
             return bad("max_rounds", self.max_rounds.to_string(), "[1, 1000]");
+        }
+        if self.ball_refine_rounds > 1000 {
+            return bad(
+                "ball_refine_rounds",
+                self.ball_refine_rounds.to_string(),
+                "[0, 1000]",
+            );
         }
         let newtons = [
             ("newton", Some(&self.newton)),
@@ -162,6 +176,13 @@ impl VolmapOptions {
                 if !(1..=1_000_000).contains(&n) {
                     return bad(what, n.to_string(), "[1, 1e6]");
                 }
+            }
+            if u.stall_decades.is_nan() || u.stall_decades <= 0.0 {
+                return bad(
+                    "untangle.stall_decades",
+                    u.stall_decades.to_string(),
+                    "(0, ∞]",
+                );
             }
         }
         Ok(())

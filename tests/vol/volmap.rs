@@ -390,6 +390,53 @@ fn untangle_reports_impossible_boundary() {
     assert_eq!(x[0], [0.0, 0.0, 0.0]);
 }
 
+/// A fold no free vertex can repair, though one vertex is free: the six tets around the split
+/// axis of a bipyramid, its poles pinned on the same side of the equator. The tets' dets sum
+/// to six times the volume the pinned surface encloses, which is negative whatever the free
+/// vertex does, so some tet stays inverted. The untangler must say so without running its
+/// whole ε schedule (the stall test: no tet fixed over a decade of ε).
+#[test]
+fn untangle_stops_on_a_fold_no_free_vertex_can_repair() {
+    let m = TetMesh::new(
+        vec![
+            [1., 0., 0.],
+            [-0.5, 0.8, 0.],
+            [-0.5, -0.8, 0.],
+            [0., 0., 1.],
+            [0., 0., -1.],
+            [0., 0., 0.],
+        ],
+        vec![
+            [3, 5, 1, 0],
+            [5, 4, 1, 0],
+            [3, 5, 2, 1],
+            [5, 4, 2, 1],
+            [3, 5, 0, 2],
+            [5, 4, 0, 2],
+        ],
+    );
+    assert!(m.inverted(&m.positions).is_empty());
+    let mut x = m.positions.clone();
+    x[4] = [0., 0., 2.];
+    let enclosed: f64 = (0..6).map(|t| m.volume_at(&x, t)).sum();
+    assert!(enclosed < 0.0);
+    let fixed = [true, true, true, true, true, false];
+    let opts = UntangleOptions::default();
+    let s = untangle(&m, &mut x, &fixed, &opts).unwrap();
+    assert!(s.inverted > 0);
+    assert_eq!(s.inverted, m.inverted(&x).len());
+    assert!(s.outer < opts.max_outer, "{} ε rounds", s.outer);
+    // Without the stall test the schedule runs to its cap.
+    let mut y = m.positions.clone();
+    y[4] = [0., 0., 2.];
+    let never = UntangleOptions {
+        stall_decades: f64::INFINITY,
+        max_outer: 40,
+        ..opts
+    };
+    assert_eq!(untangle(&m, &mut y, &fixed, &never).unwrap().outer, 40);
+}
+
 #[test]
 fn untangle_gives_up_at_once_on_inverted_pinned_tet() {
     // Same folded boundary, but now every vertex is fixed: the inverted tets have all their
@@ -421,15 +468,24 @@ fn ball_boundary_slides_to_untangle_all_boundary_tets() {
     sphere.swap(0, 7);
     let targets: Vec<(u32, [f64; 3])> = (0..8).map(|v| (v, sphere[v as usize])).collect();
     assert!(!m.inverted(&sphere).is_empty(), "the test start must fold");
-    let (x, slid, r) = slide_on_sphere(
+    let foldfree::vol::ball::Slid {
+        mesh: refined,
+        map: x,
+        targets: slid,
+        report: r,
+    } = slide_on_sphere(
         &m,
         &sphere,
         &targets,
         &UntangleOptions::default(),
         None,
+        8,
         None,
     )
     .unwrap();
+    // No chord to split (every edge of the five tets is on the cube's surface).
+    assert!(r.splits.is_empty());
+    assert_eq!(refined, m);
     assert!(r.inverted_start > 0);
     assert_eq!(r.inverted_left, 0);
     assert!(m.inverted(&x).is_empty());
@@ -438,12 +494,15 @@ fn ball_boundary_slides_to_untangle_all_boundary_tets() {
     assert_eq!(evaluate(&m, &x, &slid).rho, 0.0);
     // With the sliding relaxation: still on the sphere and fold-free, distortion not higher.
     let relax = foldfree::vol::newton::NewtonOptions::default();
-    let (y, _, r2) = slide_on_sphere(
+    let foldfree::vol::ball::Slid {
+        map: y, report: r2, ..
+    } = slide_on_sphere(
         &m,
         &sphere,
         &targets,
         &UntangleOptions::default(),
         Some(&relax),
+        0,
         None,
     )
     .unwrap();
@@ -472,9 +531,15 @@ fn cli_ball_target_writes_constraints_volcheck_confirms() {
         .arg(&out)
         .arg("--write-constraints")
         .arg(&cons)
+        .arg("--write-rest")
+        .arg(dir.join("rest_out.mesh"))
         .status()
         .unwrap();
     assert!(st.success());
+    // Nothing to refine here: the rest written is the input's tets and positions.
+    let written_rest = read_any(&dir.join("rest_out.mesh")).unwrap();
+    assert_eq!(written_rest.tets, m.tets);
+    assert_eq!(written_rest.positions, m.positions);
     let check = |map: &Path| {
         Command::new(env!("CARGO_BIN_EXE_foldfree"))
             .arg("volcheck")

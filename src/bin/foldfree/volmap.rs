@@ -44,6 +44,15 @@ pub struct VolmapArgs {
     /// ball target's boundary slid to, for `volcheck --constraints`.
     #[arg(long, value_name = "FILE")]
     write_constraints: Option<PathBuf>,
+    /// Write the rest mesh the map is of: the input, or the input refined where the ball
+    /// target split interior edges (the report's `sphere_sliding.splits`), for
+    /// `volcheck --rest`.
+    #[arg(long, value_name = "FILE")]
+    write_rest: Option<PathBuf>,
+    /// Ball target: never split an interior edge; where the untangler finds no room the run
+    /// ends with exit 3 instead of refining the mesh.
+    #[arg(long)]
+    no_refine: bool,
     /// Newton iteration cap per phase (the tuning file's `max_iters` of the deformation,
     /// penalty and post phases).
     #[arg(long)]
@@ -96,6 +105,9 @@ pub fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         }
     };
     let mut options = read_tuning(a.tuning.as_ref())?.volmap;
+    if a.no_refine {
+        options.ball_refine_rounds = 0;
+    }
     if let Some(n) = a.max_iters {
         options.newton.max_iters = n;
         options.penalty.max_iters = n;
@@ -110,6 +122,7 @@ pub fn run_volmap(a: VolmapArgs) -> foldfree::Result<()> {
         output: a.output,
         report: a.report,
         write_constraints: a.write_constraints,
+        write_rest: a.write_rest,
         quiet: a.quiet,
         max_tets: element_limit(a.max_tets),
         options,

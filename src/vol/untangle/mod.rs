@@ -56,6 +56,13 @@ pub struct UntangleOptions {
     /// solved well enough for the next, ≥ 10 % smaller ε (the schedule's σ ≥ 0.1), and steps
     /// that change the energy in its sixth digit do not move the minimum det that sets it.
     pub inner_rel_tol: f64,
+    /// Give up (with the tets still inverted) once ε has fallen this many decades since the
+    /// number of inverted tets last dropped. An inverted tet's term grows like
+    /// (|D|/ε²)^{2/3} as ε shrinks, so over one decade its pull on its corners grows
+    /// 10^{4/3} ≈ 20-fold: a fold that yields to none of that is held by its neighbours'
+    /// barriers (its det then only follows ε towards 0⁻), and smaller ε only make each step
+    /// costlier (the ball target refines there instead). ∞: never.
+    pub stall_decades: f64,
 }
 
 impl Default for UntangleOptions {
@@ -67,6 +74,7 @@ impl Default for UntangleOptions {
             history: 10,
             rel_tol: f64::INFINITY,
             inner_rel_tol: 1e-6,
+            stall_decades: 1.0,
         }
     }
 }
@@ -524,6 +532,8 @@ pub fn untangle_protected(
         curvature_rel: 1e-16,
         curvature_abs: 1e-16 * f64::MIN_POSITIVE,
     };
+    // (inverted tets, ε) when the count last dropped: the stall test.
+    let mut best = (usize::MAX, eps);
     for outer in 0..opts.max_outer {
         stats.outer = outer + 1;
         let mut f = AtEps {
@@ -537,7 +547,23 @@ pub fn untangle_protected(
         let (e, e_prev) = (r.energy, r.initial_energy);
         stats.iterations += r.iterations;
         evals += r.evaluations;
-        detmin = min_det(x);
+        let dets = prob.dets(x);
+        detmin = dets.iter().copied().fold(f64::INFINITY, f64::min);
+        let inverted = dets
+            .iter()
+            .filter(|d| !super::tet::is_positive(**d))
+            .count();
+        if inverted < best.0 {
+            best = (inverted, eps);
+        } else if inverted > 0 && eps < best.1 * 10f64.powf(-opts.stall_decades) {
+            if trace {
+                eprintln!(
+                    "untangle: stalled, {inverted} inverted since ε {:.3e} (now {eps:.3e})",
+                    best.1
+                );
+            }
+            break;
+        }
         // The paper's ε update: aim for χ(detmin) to shrink by the achieved relative decrease.
         eps = next_eps(e, e_prev, detmin, chi(detmin, eps).0);
         stats.energy = e;
