@@ -638,16 +638,7 @@ mod tests {
     /// boundary, the axis a chord), one of them inverted in `x`.
     #[test]
     fn refinement_splits_interior_edges_of_the_folds_never_boundary_ones() {
-        let mut m = TetMesh::new(
-            vec![
-                [1., 0., 0.],
-                [-0.5, 0.8, 0.],
-                [-0.5, -0.8, 0.],
-                [0., 0., 1.],
-                [0., 0., -1.],
-            ],
-            vec![[3, 4, 1, 0], [3, 4, 2, 1], [3, 4, 0, 2]],
-        );
+        let mut m = crate::vol::tet::tests::bipyramid();
         let be = boundary_edges(&m);
         assert_eq!(be.len(), 9);
         assert!(!be.contains(&[3, 4]));

@@ -279,7 +279,7 @@ pub fn check_indices(tets: &[[u32; 4]], nv: usize, file: &Path) -> Result<(), Vo
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -302,7 +302,7 @@ mod tests {
 
     /// Three tets around the axis 3–4 of a triangular bipyramid: the axis is an interior edge
     /// whose two ends are on the boundary (a chord, once on the sphere).
-    fn bipyramid() -> TetMesh {
+    pub(crate) fn bipyramid() -> TetMesh {
         TetMesh::new(
             vec![
                 [1., 0., 0.],

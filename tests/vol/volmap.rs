@@ -397,24 +397,24 @@ fn untangle_reports_impossible_boundary() {
 /// whole ε schedule (the stall test: no tet fixed over a decade of ε).
 #[test]
 fn untangle_stops_on_a_fold_no_free_vertex_can_repair() {
-    let m = TetMesh::new(
-        vec![
-            [1., 0., 0.],
-            [-0.5, 0.8, 0.],
-            [-0.5, -0.8, 0.],
-            [0., 0., 1.],
-            [0., 0., -1.],
-            [0., 0., 0.],
-        ],
-        vec![
-            [3, 5, 1, 0],
-            [5, 4, 1, 0],
-            [3, 5, 2, 1],
-            [5, 4, 2, 1],
-            [3, 5, 0, 2],
-            [5, 4, 0, 2],
-        ],
-    );
+    // Equator 0–2, poles 3 (up) and 4 (down), the centre 5 on the split axis.
+    let mut positions: Vec<[f64; 3]> = (0..3)
+        .map(|k| {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / 3.0;
+            [a.cos(), a.sin(), 0.0]
+        })
+        .collect();
+    positions.extend([[0., 0., 1.], [0., 0., -1.], [0., 0., 0.]]);
+    let tets = [[3, 4, 1, 0], [3, 4, 2, 1], [3, 4, 0, 2]]
+        .iter()
+        .flat_map(|t| {
+            [
+                t.map(|v| if v == 4 { 5 } else { v }),
+                t.map(|v| if v == 3 { 5 } else { v }),
+            ]
+        })
+        .collect();
+    let m = TetMesh::new(positions, tets);
     assert!(m.inverted(&m.positions).is_empty());
     let mut x = m.positions.clone();
     x[4] = [0., 0., 2.];
