@@ -141,7 +141,7 @@ fn a_bad_tuning_file_is_bad_input_naming_file_line_and_key() {
     let dir = TempDir::new("tuning_bad");
     let grid = data("square_grid_10x10.obj");
     let cube = data("cube_5tets.mesh");
-    let cases: [(&str, &str, usize, &str); 6] = [
+    let cases: [(&str, &str, usize, &str); 8] = [
         (
             "param",
             "[admm]\nmu = 100.0\nmux = 3\n",
@@ -167,6 +167,18 @@ fn a_bad_tuning_file_is_bad_input_naming_file_line_and_key() {
             "[volmap.post]\nmax_iters = 0\n",
             2,
             "post.max_iters = 0",
+        ),
+        (
+            "volmap",
+            "[volmap]\nball_refine_rounds = 1001\n",
+            2,
+            "ball_refine_rounds = 1001 is outside its range",
+        ),
+        (
+            "volmap",
+            "[volmap.untangle]\nstall_decades = 0.0\n",
+            2,
+            "untangle.stall_decades = 0",
         ),
     ];
     for (i, (cmd, text, line, needle)) in cases.into_iter().enumerate() {

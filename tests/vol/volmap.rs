@@ -536,6 +536,20 @@ fn cli_ball_target_writes_constraints_volcheck_confirms() {
         .status()
         .unwrap();
     assert!(st.success());
+    // `--no-refine` (refinement off) gives the same map where nothing needs refining.
+    let out2 = dir.join("out2.mesh");
+    let st = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .arg("volmap")
+        .arg(&rest)
+        .args(["--target", "ball", "--no-refine", "-q", "-o"])
+        .arg(&out2)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    assert_eq!(
+        std::fs::read_to_string(&out).unwrap(),
+        std::fs::read_to_string(&out2).unwrap()
+    );
     // Nothing to refine here: the rest written is the input's tets and positions.
     let written_rest = read_any(&dir.join("rest_out.mesh")).unwrap();
     assert_eq!(written_rest.tets, m.tets);
