@@ -21,7 +21,10 @@
 //!    the partition is split, merged or has faces moved — never the positions;
 //! 5. `refit`: each plane moved to the one nearest the region's input vertices (least
 //!    absolute distances, the error the run reports) where the polygons built on them stay
-//!    valid.
+//!    valid;
+//! 6. `relabel`: border faces moved to the neighbouring region whose plane their vertices
+//!    are nearer to (leaf faces, away from junctions, so the corners stay), the polygons built
+//!    again and the planes refitted (stage 5 again) — kept only if valid and nearer.
 //!
 //! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the valid polygon mesh
 //! nearest the input is kept. OUT.obj is the triangulation of the polygons: the connectivity
@@ -35,6 +38,7 @@ pub mod lloyd;
 pub mod normals_l0;
 pub mod outline;
 pub mod polygons;
+mod relabel;
 pub mod sparse;
 pub mod vertex_update;
 
@@ -824,6 +828,11 @@ fn realise(
         .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
     let vc = cluster::vertex_clusters(surface.topo, &r.labels);
     refit(surface, &mesh.positions, &vc, &mut r, diag);
+    if relabel::relabel(surface, &mesh.positions, &mut r, diag) {
+        let vc = cluster::vertex_clusters(surface.topo, &r.labels);
+        refit(surface, &mesh.positions, &vc, &mut r, diag);
+    }
+    let vc = cluster::vertex_clusters(surface.topo, &r.labels);
     let mut times = StageTimes {
         normals: smoothed.seconds_normals,
         vertices: smoothed.seconds_vertices,

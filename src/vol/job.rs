@@ -229,7 +229,7 @@ pub fn run_volmap_job(job: &VolmapJob) -> Result<VolmapFileReport, VolError> {
                     .map_err(locate)?;
                     let ok = s.inverted_left == 0;
                     if ok {
-                        // The chords split on the way are the output's: the rest refined
+                        // The edges split on the way are the output's: the rest refined
                         // the same way (midpoints; appended vertices and tets).
                         if !s.splits.is_empty() {
                             rest_file = TetMesh {
