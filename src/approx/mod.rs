@@ -675,24 +675,7 @@ fn refit(
             .zip(&t)
             .map(|((a, b), &t)| geom::blend_planes(a, b, t))
             .collect();
-        let built = outline::build(surface, &r.labels, &planes).map_err(|d| d.regions());
-        // The independent check of the output, too: new planes can leave a triangle without
-        // area that the construction does not test for (seen in the corpus sweep).
-        let built = built.and_then(|(polygons, triangles, triangle_region)| {
-            let bad = bad_triangles(
-                &polygons.positions,
-                &triangles,
-                &triangle_region,
-                &planes,
-                diag,
-            );
-            if bad.is_empty() {
-                Ok((polygons, triangles, triangle_region))
-            } else {
-                Err(bad.iter().map(|b| triangle_region[b.0]).collect())
-            }
-        });
-        match built {
+        match build_checked(surface, &r.labels, &planes, diag) {
             Ok((polygons, triangles, triangle_region)) => {
                 let error = |p: &[Plane]| input_distances(pos, regions_at, p).0;
                 let (before, after) = (error(&r.planes), error(&planes));
@@ -728,6 +711,32 @@ fn refit(
                 }
             }
         }
+    }
+}
+
+/// The polygons built on `planes` for `labels` ([`outline::build`]) and checked as every
+/// output is ([`bad_triangles`]): new planes or borders can leave a triangle without area that
+/// the construction does not test for (seen in the corpus sweep). On a fault, the regions it
+/// names.
+fn build_checked(
+    surface: &outline::Surface<'_>,
+    labels: &[u32],
+    planes: &[Plane],
+    diag: f64,
+) -> Result<outline::Built, Vec<u32>> {
+    let (polygons, triangles, triangle_region) =
+        outline::build(surface, labels, planes).map_err(|d| d.regions())?;
+    let bad = bad_triangles(
+        &polygons.positions,
+        &triangles,
+        &triangle_region,
+        planes,
+        diag,
+    );
+    if bad.is_empty() {
+        Ok((polygons, triangles, triangle_region))
+    } else {
+        Err(bad.iter().map(|b| triangle_region[b.0]).collect())
     }
 }
 

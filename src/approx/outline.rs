@@ -646,7 +646,7 @@ fn region_polygon(
 }
 
 /// A polygon mesh, its triangles and the region of each triangle.
-type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
+pub(crate) type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
 
 /// The polygon mesh of a partition with its planes, and its triangles (in the polygons'
 /// planes); corners index into one shared list.

@@ -13,7 +13,7 @@
 //! undone, and the whole is dropped after 8 builds. Then the planes are refitted to the moved
 //! vertex sets (stage 5 again).
 
-use super::{bad_triangles, cluster, input_distances, outline, V3};
+use super::{build_checked, cluster, input_distances, outline, V3};
 
 /// Moves faces on a region's border to the neighbouring region whose plane their vertices are
 /// nearer to, when that lowers the headline error over the realised planes, and builds the
@@ -131,34 +131,24 @@ pub(super) fn relabel(
         if after >= before {
             break;
         }
-        let named: Vec<u32> = match outline::build(surface, &labels, &planes) {
+        let named = match build_checked(surface, &labels, &planes, diag) {
             Ok((polygons, triangles, triangle_region)) => {
-                let bad = bad_triangles(
-                    &polygons.positions,
-                    &triangles,
-                    &triangle_region,
-                    &planes,
-                    diag,
-                );
-                if bad.is_empty() {
-                    if trace {
-                        eprintln!(
-                            "approx: relabel: {} faces, mean distance {:.4e} → {:.4e}·diag, {builds} builds",
-                            moves.len(),
-                            before / diag,
-                            after / diag
-                        );
-                    }
-                    r.polygons = polygons;
-                    r.triangles = triangles;
-                    r.triangle_region = triangle_region;
-                    r.labels = labels;
-                    r.planes = planes;
-                    return true;
+                if trace {
+                    eprintln!(
+                        "approx: relabel: {} faces, mean distance {:.4e} → {:.4e}·diag, {builds} builds",
+                        moves.len(),
+                        before / diag,
+                        after / diag
+                    );
                 }
-                bad.iter().map(|b| triangle_region[b.0]).collect()
+                r.polygons = polygons;
+                r.triangles = triangles;
+                r.triangle_region = triangle_region;
+                r.labels = labels;
+                r.planes = planes;
+                return true;
             }
-            Err(d) => d.regions(),
+            Err(named) => named,
         };
         moves.retain(|&(f, a, b)| {
             if named.contains(&a) || named.contains(&b) {
@@ -179,6 +169,7 @@ pub(super) fn relabel(
 mod tests {
     use super::super::geom::{self, face_normals_areas};
     use super::*;
+    use crate::approx::bad_triangles;
     use crate::init::test_grid::{bumpy, id};
     use crate::mesh::{Topology, TriMesh};
     use std::path::Path;
