@@ -10,8 +10,8 @@
 //! A stays connected) and when none of its vertices is or becomes a junction of three regions
 //! (the corners, where three planes meet, stay where they were). The polygons are built again
 //! on the same planes and checked as every output is; regions a fault names get their moves
-//! undone, and the whole is dropped after 8 builds. Then the planes are refitted to the moved
-//! vertex sets (stage 5 again).
+//! undone, and the whole is dropped after 8 builds or if a region ends in two pieces. Then
+//! the planes are refitted to the moved vertex sets (stage 5 again).
 
 use super::{build_checked, cluster, input_distances, outline, V3};
 
@@ -131,6 +131,11 @@ pub(super) fn relabel(
         if after >= before {
             break;
         }
+        // Undoing a move can strand a face that moved in through it: every region must
+        // still be one piece, or the whole is dropped.
+        if !regions_connected(topo, &labels) {
+            break;
+        }
         let named = match build_checked(surface, &labels, &planes, diag) {
             Ok((polygons, triangles, triangle_region)) => {
                 if trace {
@@ -163,6 +168,36 @@ pub(super) fn relabel(
         eprintln!("approx: relabel: not kept ({builds} builds)");
     }
     false
+}
+
+/// Whether every region's faces are connected across edges.
+fn regions_connected(topo: &crate::mesh::Topology, labels: &[u32]) -> bool {
+    let n = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
+    let mut seen = vec![false; labels.len()];
+    let mut started = vec![false; n];
+    let mut stack = Vec::new();
+    for f0 in 0..labels.len() {
+        if seen[f0] {
+            continue;
+        }
+        let l = labels[f0];
+        if std::mem::replace(&mut started[l as usize], true) {
+            return false; // a second piece of region l
+        }
+        seen[f0] = true;
+        stack.push(f0);
+        while let Some(f) = stack.pop() {
+            for &e in &topo.face_edges[f] {
+                for g in topo.edge_faces[e as usize] {
+                    if g != crate::mesh::NO_FACE && !seen[g as usize] && labels[g as usize] == l {
+                        seen[g as usize] = true;
+                        stack.push(g as usize);
+                    }
+                }
+            }
+        }
+    }
+    true
 }
 
 #[cfg(test)]
@@ -225,5 +260,10 @@ mod tests {
         );
         assert!(bad.is_empty());
         assert_eq!(r.polygons.polygons.len(), 2);
+        assert!(regions_connected(&topo, &r.labels));
+        // A face of region 1 set apart inside region 0 is a second piece of region 1.
+        let mut split = r.labels.clone();
+        split[0] = 1;
+        assert!(!regions_connected(&topo, &split));
     }
 }
