@@ -122,12 +122,12 @@ pub(super) fn relabel(
     let old_at = cluster::vertex_clusters(topo, &r.labels);
     let before = input_distances(pos, &old_at, &r.planes).0;
     let mut builds = 0;
-    // Moves are undone, latest first, for the regions a failed build names.
+    // The planes are held: a failed build names regions, whose moves are undone (each to the
+    // label the move left; a face moved twice keeps its first move if only the second is named).
     while !moves.is_empty() && builds < 8 {
         builds += 1;
         let at = cluster::vertex_clusters(topo, &labels);
-        let planes = r.planes.clone();
-        let after = input_distances(pos, &at, &planes).0;
+        let after = input_distances(pos, &at, &r.planes).0;
         if after >= before {
             break;
         }
@@ -136,7 +136,7 @@ pub(super) fn relabel(
         if !regions_connected(topo, &labels) {
             break;
         }
-        let named = match build_checked(surface, &labels, &planes, diag) {
+        let named = match build_checked(surface, &labels, &r.planes, diag) {
             Ok((polygons, triangles, triangle_region)) => {
                 if trace {
                     eprintln!(
@@ -150,7 +150,6 @@ pub(super) fn relabel(
                 r.triangles = triangles;
                 r.triangle_region = triangle_region;
                 r.labels = labels;
-                r.planes = planes;
                 return true;
             }
             Err(named) => named,
