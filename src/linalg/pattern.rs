@@ -118,6 +118,89 @@ impl<const D: usize, const K: usize> BlockPattern<D, K> {
     /// later ([`BlockPattern::rebind`]) without a new pattern.
     pub fn with_extra(nv: usize, simplices: &[[u32; K]], extra: &[[u32; K]]) -> Self {
         let (ptr, nb) = neighbour_lists(nv, &[simplices, extra], true);
+        let mut pattern = Self::from_lists(nv, &ptr, &nb);
+        // Neither can fail: every corner was inserted into every other's list, and every
+        // vertex into its own.
+        pattern.rebind(0, simplices);
+        pattern.diag_slot = (0..nv as u32)
+            .map(|v| pattern.find(v, v).unwrap_or(0))
+            .collect();
+        pattern
+    }
+
+    /// The pattern of this one's simplices (`base`, the ones its slots are for) followed by
+    /// `simplices`, with blocks reserved for `extra`: what [`BlockPattern::with_extra`] gives
+    /// for `base ++ simplices` and `extra`, built from this pattern. Only the rows `simplices`
+    /// and `extra` add blocks to are merged, and only the slots in those rows looked up again.
+    ///
+    /// Why: the bijective UV solver's scaffold is re-triangulated many times per solve, and
+    /// each new triangulation needs a new pattern of the chart with it; the scaffold only
+    /// couples the chart's boundary vertices, so all other rows and slots are the chart's, the
+    /// same every time (rebuilding them was a sixth of the scaffolded solve).
+    pub fn extended(&self, base: &[[u32; K]], simplices: &[[u32; K]], extra: &[[u32; K]]) -> Self {
+        let nv = self.n / D;
+        let (eptr, eidx) = neighbour_lists(nv, &[simplices, extra], false);
+        let mut ptr = Vec::with_capacity(nv + 1);
+        let mut nb: Vec<u32> = Vec::with_capacity(self.indices.len() / (D * D) + eidx.len());
+        let mut changed = vec![false; nv];
+        ptr.push(0);
+        for (a, grew) in changed.iter_mut().enumerate() {
+            let row = &self.indices[self.indptr[D * a]..self.indptr[D * a + 1]];
+            let old = row.iter().step_by(D).map(|&c| (c / D) as u32);
+            let add = &eidx[eptr[a]..eptr[a + 1]];
+            let start = nb.len();
+            if add.is_empty() {
+                nb.extend(old);
+            } else {
+                // Both ascending: a merge, each vertex once.
+                let mut add = add.iter().copied().peekable();
+                for b in old {
+                    while let Some(&c) = add.peek() {
+                        if c >= b {
+                            break;
+                        }
+                        nb.push(c);
+                        add.next();
+                    }
+                    if add.peek() == Some(&b) {
+                        add.next();
+                    }
+                    nb.push(b);
+                }
+                nb.extend(add);
+                *grew = nb.len() - start != row.len() / D;
+            }
+            ptr.push(nb.len());
+        }
+        let mut pattern = Self::from_lists(nv, &ptr, &nb);
+        let mut slot = self.slot[..base.len().min(self.slot.len())].to_vec();
+        for (t, s) in base.iter().zip(slot.iter_mut()) {
+            for i in 0..K {
+                if pattern.fixed(t[i]) || !changed[t[i] as usize] {
+                    continue;
+                }
+                for j in 0..K {
+                    if !pattern.fixed(t[j]) {
+                        s[i][j] = pattern.find(t[i], t[j]).unwrap_or(FIXED);
+                    }
+                }
+            }
+        }
+        pattern.slot = slot;
+        pattern.diag_slot = (0..nv as u32)
+            .map(|v| match changed[v as usize] {
+                true => pattern.find(v, v).unwrap_or(0),
+                false => self.diag_slot[v as usize],
+            })
+            .collect();
+        // Cannot fail: every corner of `simplices` is in every other's merged row.
+        pattern.rebind(base.len(), simplices);
+        pattern
+    }
+
+    /// The CSR structure of the neighbour lists `nb[ptr[a]..ptr[a + 1]]` (ascending), without
+    /// slots.
+    fn from_lists(nv: usize, ptr: &[usize], nb: &[u32]) -> Self {
         let n = D * nv;
         let mut indptr = Vec::with_capacity(n + 1);
         let mut indices = Vec::with_capacity(D * D * nb.len());
@@ -132,20 +215,13 @@ impl<const D: usize, const K: usize> BlockPattern<D, K> {
                 indptr.push(indices.len());
             }
         }
-        let mut pattern = BlockPattern {
+        BlockPattern {
             n,
             indptr,
             indices,
             slot: Vec::new(),
             diag_slot: Vec::new(),
-        };
-        // Neither can fail: every corner was inserted into every other's list, and every
-        // vertex into its own.
-        pattern.rebind(0, simplices);
-        pattern.diag_slot = (0..nv as u32)
-            .map(|v| pattern.find(v, v).unwrap_or(0))
-            .collect();
-        pattern
+        }
     }
 
     /// Replaces the simplices from `first` on by `simplices` (their slots), if the pattern has
@@ -263,5 +339,46 @@ mod tests {
         assert_ne!(q.slot[0][0][1], FIXED);
         // Vertex 3 is in no face: its row holds its diagonal block only.
         assert_eq!(q.indptr[7] - q.indptr[6], 2);
+    }
+
+    /// A grid's pattern extended by triangles among its border vertices and fixed corners
+    /// (a scaffold), with reserved blocks, is the pattern built from scratch: same structure,
+    /// same slots, same diagonal slots.
+    #[test]
+    fn extended_equals_the_pattern_built_from_scratch() {
+        let m = 5u32;
+        let id = |i: u32, j: u32| i * m + j;
+        let mut base = Vec::new();
+        for i in 0..m - 1 {
+            for j in 0..m - 1 {
+                base.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                base.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let nv = (m * m) as usize;
+        let frame = nv as u32;
+        // Border vertices joined across the grid and to fixed corners from `nv` on.
+        let scaffold = [
+            [id(0, 0), id(0, 4), frame],
+            [id(0, 4), id(4, 4), frame + 1],
+            [id(4, 0), id(0, 2), id(4, 4)],
+            [id(2, 0), frame, frame + 1],
+        ];
+        let extra = [[id(0, 1), id(4, 3), frame + 2]];
+        let chart = BlockPattern::<2, 3>::new(nv, &base);
+        let all: Vec<[u32; 3]> = base.iter().chain(&scaffold).copied().collect();
+        let want = BlockPattern::<2, 3>::with_extra(nv, &all, &extra);
+        let got = chart.extended(&base, &scaffold, &extra);
+        assert_eq!(got.n, want.n);
+        assert_eq!(got.indptr, want.indptr);
+        assert_eq!(got.indices, want.indices);
+        assert_eq!(got.slot, want.slot);
+        assert_eq!(got.diag_slot, want.diag_slot);
+        // The scaffold added blocks (the test exercises merged rows).
+        assert!(want.indices.len() > chart.indices.len());
+        // Extending with nothing is the chart's pattern.
+        let same = chart.extended(&base, &[], &[]);
+        assert_eq!(same.indices, chart.indices);
+        assert_eq!(same.slot, chart.slot);
     }
 }

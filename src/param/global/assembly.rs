@@ -134,6 +134,24 @@ impl Pattern {
         })
     }
 
+    /// The pattern of this one's faces (`base`, those it is set up for) followed by `faces`,
+    /// with blocks reserved for `extra`: [`Pattern::with_extra`] of `base ++ faces`, built
+    /// from this one ([`BlockPattern::extended`]: only the rows `faces` add blocks to are
+    /// merged — a scaffold's, on the chart's pattern).
+    pub fn extended(&self, base: &[[u32; 3]], faces: &[[u32; 3]], extra: &[[u32; 3]]) -> Pattern {
+        let blocks = self.blocks.extended(base, faces, extra);
+        let nv = blocks.n / 2;
+        let diag = (0..2 * nv)
+            .map(|i| blocks.diag((i / 2) as u32, i % 2))
+            .collect();
+        let matrix = blocks.matrix(vec![0.0; blocks.indices.len()]);
+        Pattern {
+            matrix,
+            blocks,
+            diag,
+        }
+    }
+
     /// Sets the pattern up for faces that replace those from `first` on, keeping the
     /// structure (and so any symbolic factorisation of it), when it has every block they
     /// need; `false` otherwise.

@@ -486,9 +486,13 @@ pub fn solve(
         // triangulation, and the Delaunay one of the current boundary is the best there is);
         // otherwise its triangles stay and only their rest shapes are reset to the current
         // ones, so the pattern and the symbolic factorisation stay too.
+        // Whether the scaffold's triangles are new this iteration (its system then needs
+        // their slots, or a new pattern).
+        let mut retriangulated = false;
         if let (Some(b), true) = (&boundary, scaffolded) {
             let kept = !remesh && scaffold.as_mut().is_some_and(|s| s.reset_rest(&xc, nv));
             if !kept {
+                retriangulated = true;
                 let s =
                     scaffold::Scaffold::build(&xc, nv, b).ok_or_else(|| SolveError::Failed {
                         what:
@@ -519,15 +523,16 @@ pub fn solve(
         // A new pattern costs an ordering and a symbolic analysis, about three numeric
         // factorisations of a 2D-mesh system; the frame's vertices are not unknowns (the
         // frame is fixed), so triangles that only change how the boundary meets the frame
-        // change no block either.
-        if let Some(s) = &scaffold {
+        // change no block either. A new pattern is the chart's with the boundary rows merged
+        // ([`Pattern::extended`]); triangles kept from the last iteration need nothing.
+        if let (Some(s), true) = (&scaffold, retriangulated) {
             let n = chart.n_chart;
             // Same structure after a rebind: the symbolic factorisation stays valid.
             let kept = scaffold_system
                 .as_mut()
                 .is_some_and(|c| c.0.rebind(n, &problem.faces[n..]));
             if !kept {
-                let p = Pattern::with_extra(nv, &problem.faces, &s.flip_diagonals())?;
+                let p = pattern.extended(&chart.faces, &problem.faces[n..], &s.flip_diagonals());
                 scaffold_system = Some((p, None));
             }
         }

@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Solve time of the bijective default against the unconstrained solve, interleaved per mesh.
+
+Usage:
+  python3 benches/bijective_time.py --bin BIN [--base BASE_BIN] --out FILE.jsonl [--reps 2] \\
+      [--timeout 600] MESH_OR_FOLDER... [-- EXTRA_PARAM_ARGS...]
+
+For each mesh (a folder stands for its `*.obj`, sorted), `--reps` rounds of, one after the other:
+  BIN param MESH -o T.obj --report T.json -q                                   (bijective, default)
+  BASE param MESH ... (the same, when --base is given: a change measured beside its parent)
+  BIN param MESH ... --no-bijective --tuning T.toml   with [cut] overlap_splits = 0 (unconstrained)
+and the median of each mode's report `seconds_solve` (the solver alone: cutting, packing and I/O
+are the same in both modes). Interleaving per mesh is what makes the ratio trustworthy on this
+box: whole sweeps run minutes apart drift by up to ~25 % per mesh (BENCHMARKS.md, bijective
+round 3). One JSON line per mesh goes to FILE as it finishes: seconds, iterations, SD energy and
+`boundary_self_intersections` of each mode, and `ratio` (= bijective / unconstrained; `ratio_base`
+likewise for BASE). The summary (stdout) gives the medians of the ratios and the worst meshes.
+"""
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+
+def collect(inputs):
+    out = []
+    for i in inputs:
+        p = Path(i)
+        out.extend(sorted(p.glob("*.obj")) if p.is_dir() else [p])
+    return out
+
+
+def run(binary, mesh, extra, tmp, timeout):
+    obj, rep = Path(tmp) / "o.obj", Path(tmp) / "r.json"
+    rep.unlink(missing_ok=True)
+    cmd = [binary, "param", str(mesh), "-o", str(obj), "--report", str(rep), "-q", *extra]
+    try:
+        p = subprocess.run(cmd, capture_output=True, timeout=timeout or None)
+    except subprocess.TimeoutExpired:
+        return None
+    if p.returncode != 0 or not rep.exists():
+        return None
+    r = json.loads(rep.read_text())
+    return {
+        "seconds": r.get("seconds_solve"),
+        "iterations": r.get("iterations"),
+        "sd": r.get("metrics", {}).get("sd_energy", r.get("sd_energy")),
+        "crossings": r.get("boundary_self_intersections"),
+    }
+
+
+def main():
+    argv = sys.argv[1:]
+    extra = []
+    if "--" in argv:
+        k = argv.index("--")
+        argv, extra = argv[:k], argv[k + 1 :]
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--bin", required=True)
+    ap.add_argument("--base")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--reps", type=int, default=2)
+    ap.add_argument("--timeout", type=float, default=600)
+    ap.add_argument("inputs", nargs="+")
+    a = ap.parse_args(argv)
+    meshes = collect(a.inputs)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp, open(a.out, "w") as out:
+        toml = Path(tmp) / "unconstrained.toml"
+        toml.write_text("[cut]\noverlap_splits = 0\n")
+        modes = [("bijective", a.bin, extra)]
+        if a.base:
+            modes.append(("base", a.base, extra))
+        modes.append(("unconstrained", a.bin, [*extra, "--no-bijective", "--tuning", str(toml)]))
+        for i, mesh in enumerate(meshes):
+            runs = {m: [] for m, _, _ in modes}
+            for _ in range(a.reps):
+                for m, binary, args in modes:
+                    r = run(binary, mesh, args, tmp, a.timeout)
+                    if r is not None:
+                        runs[m].append(r)
+            row = {"mesh": mesh.stem, "path": str(mesh)}
+            for m in runs:
+                if runs[m]:
+                    row[m] = {
+                        "seconds": statistics.median(r["seconds"] for r in runs[m]),
+                        "iterations": runs[m][0]["iterations"],
+                        "sd": runs[m][0]["sd"],
+                        "crossings": runs[m][0]["crossings"],
+                    }
+            u = row.get("unconstrained", {}).get("seconds")
+            for m, key in (("bijective", "ratio"), ("base", "ratio_base")):
+                s = row.get(m, {}).get("seconds")
+                if s is not None and u:
+                    row[key] = s / u
+            rows.append(row)
+            out.write(json.dumps(row) + "\n")
+            out.flush()
+            print(f"[{i + 1}/{len(meshes)}] {mesh.stem}: ratio {row.get('ratio', float('nan')):.2f}"
+                  + (f" (base {row.get('ratio_base', float('nan')):.2f})" if a.base else ""), file=sys.stderr)
+    for key in ("ratio", "ratio_base"):
+        vals = [r[key] for r in rows if key in r]
+        if vals:
+            print(f"{key}: median {statistics.median(vals):.3f} over {len(vals)} meshes, "
+                  f"max {max(vals):.2f}, above 1.5: {sum(v > 1.5 for v in vals)}")
+    tot = {m: sum(r[m]["seconds"] for r in rows if m in r) for m in ("bijective", "base", "unconstrained")}
+    print("total seconds_solve: " + ", ".join(f"{m} {s:.2f}" for m, s in tot.items() if s))
+    worst = sorted((r for r in rows if "ratio" in r), key=lambda r: -r["ratio"])[:8]
+    for r in worst:
+        b, u = r["bijective"], r["unconstrained"]
+        print(f"  {r['mesh']}: {r['ratio']:.2f} ({b['seconds']:.3f} s, {b['iterations']} its / "
+              f"{u['seconds']:.3f} s, {u['iterations']} its)")
+
+
+if __name__ == "__main__":
+    main()
