@@ -173,7 +173,12 @@ impl<const D: usize, const K: usize> BlockPattern<D, K> {
             ptr.push(nb.len());
         }
         let mut pattern = Self::from_lists(nv, &ptr, &nb);
-        let mut slot = self.slot[..base.len().min(self.slot.len())].to_vec();
+        debug_assert_eq!(
+            base.len(),
+            self.slot.len(),
+            "`base` is this pattern's simplices"
+        );
+        let mut slot = self.slot.clone();
         for (t, s) in base.iter().zip(slot.iter_mut()) {
             for i in 0..K {
                 if pattern.fixed(t[i]) || !changed[t[i] as usize] {
