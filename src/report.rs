@@ -54,6 +54,9 @@ pub struct ParamReport {
     pub converged: Option<bool>,
     pub mu_rel: Option<f64>,
     pub init_flips: usize,
+    /// Maps a solver was to start from that were replaced by Tutte's embedding, by reason
+    /// (charts, for an atlas): the map the report's `init` names, or ADMM's result handed on.
+    pub tutte_starts: TutteStarts,
     /// Device time per kernel (`--profile`, Vulkan only).
     pub kernel_times: Option<crate::param::admm::vulkan::KernelTimes>,
     /// Bytes the kernels read and write per iteration (Vulkan only), for bandwidth estimates.
@@ -71,6 +74,43 @@ pub struct ParamReport {
     /// ran: `--solver global`, or after ADMM's hand-off).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub global: Option<crate::param::global::GlobalResult>,
+}
+
+/// Why maps were replaced by Tutte's embedding before a solve, counted. Tutte's map of a disk
+/// is flip-free with a convex boundary whatever the mesh, so every solver can start from it;
+/// the report says so, since the `init` it names was then not where the solver started.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct TutteStarts {
+    /// The map had flipped faces (no solver crosses det = 0).
+    pub folded: usize,
+    /// Its energy was infinite (a face shrunk to nothing: a barrier no step crosses).
+    pub non_finite: usize,
+    /// Its boundary crossed or touched itself (the bijective solvers start from a simple one).
+    pub boundary_crosses_itself: usize,
+}
+
+impl TutteStarts {
+    /// Counts one replacement of a map that is `folded`, of `finite` energy and with a
+    /// `simple` boundary (the first reason that holds); false when there is none.
+    pub fn note(&mut self, folded: bool, finite: bool, simple: bool) -> bool {
+        if folded {
+            self.folded += 1;
+        } else if !finite {
+            self.non_finite += 1;
+        } else if !simple {
+            self.boundary_crosses_itself += 1;
+        } else {
+            return false;
+        }
+        true
+    }
+
+    /// The counts of `self` and `o` together (an atlas's charts).
+    pub fn add(&mut self, o: &TutteStarts) {
+        self.folded += o.folded;
+        self.non_finite += o.non_finite;
+        self.boundary_crosses_itself += o.boundary_crosses_itself;
+    }
 }
 
 /// The written file's texture-coordinate convention, so that a reader of the report knows how

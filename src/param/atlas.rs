@@ -179,6 +179,7 @@ pub(crate) fn run_atlas(
         seconds_init += map.seconds_init;
         seconds_solve += map.seconds_solve;
         report.init_flips += map.init_flips;
+        report.tutte_starts.add(&map.tutte_starts);
         converged &= map.converged();
         path = path.combine(map.path);
         // The report's stop line, convergence plot and global history show the largest chart.

@@ -350,6 +350,7 @@ fn solve(
     let mut report = ParamReport {
         init: job.init.name().into(),
         init_flips: map.init_flips,
+        tutte_starts: map.tutte_starts,
         backend: "cpu".into(),
         device: "host CPU".into(),
         solver: solver.name().into(),

@@ -131,6 +131,8 @@ pub struct MapOutput {
     pub uv: Vec<[f64; 2]>,
     /// Flipped faces of the start map.
     pub init_flips: usize,
+    /// Maps replaced by Tutte's before a solve, by reason.
+    pub tutte_starts: crate::report::TutteStarts,
     /// The ADMM run, when it ran.
     pub admm: Option<admm::AdmmResult>,
     /// The global solver's run, when it ran (alone, or after ADMM's hand-off).
@@ -152,6 +154,7 @@ impl MapOutput {
         MapOutput {
             uv,
             init_flips,
+            tutte_starts: Default::default(),
             admm: None,
             global: None,
             start_proxy_iterations: 0,
@@ -262,7 +265,7 @@ pub fn compute_map(
                            out: &mut MapOutput,
                            progress: &mut dyn FnMut(Progress<'_>)|
      -> Result<()> {
-        if folded || !finite(uv) || !simple(uv) {
+        if out.tutte_starts.note(folded, finite(uv), simple(uv)) {
             // Tutte's map is an embedding: flip-free with a simple (convex) boundary.
             *uv = tutte_map(mesh, topo, area_3d, &finite)?;
         }
@@ -289,7 +292,7 @@ pub fn compute_map(
                 // lowers the energy by more than the global solver's own proxy switch (the
                 // point where it judges the remaining change local and turns to Newton);
                 // ADMM converges from there. Every step is flip-free, so the start is too.
-                if folded || !finite(&uv) {
+                if out.tutte_starts.note(folded, finite(&uv), true) {
                     uv = tutte_map(mesh, topo, area_3d, &finite)?;
                 }
                 let start = global::solve(
@@ -348,12 +351,16 @@ pub fn compute_map(
                 // same iteration (on the same device), from ADMM's start map when that is an
                 // embedding, else from Tutte's; when that run stops short, the bijective
                 // global solver finishes from its best map.
-                let flip_free = crate::init::count_flips(&mesh.faces, &admm_start) == 0;
-                let start = if flip_free && simple(&admm_start) && finite(&admm_start) {
-                    admm_start
-                } else {
-                    tutte_map(mesh, topo, area_3d, &finite)?
-                };
+                let folded = crate::init::count_flips(&mesh.faces, &admm_start) > 0;
+                let start =
+                    if out
+                        .tutte_starts
+                        .note(folded, finite(&admm_start), simple(&admm_start))
+                    {
+                        tutte_map(mesh, topo, area_3d, &finite)?
+                    } else {
+                        admm_start
+                    };
                 let first = out.admm.take().expect("the ADMM run");
                 match run_admm_scaffolded(&problem, mesh, &start, opts, device, progress, &mut out)?
                 {

@@ -268,6 +268,46 @@ fn cli_solver_global_writes_a_flip_free_map_and_its_report() {
     assert!(out.exists());
 }
 
+/// A start map the solver cannot start from is replaced by Tutte's, and the report says so and
+/// why: LSCM folds camel_open (its ears), Tutte's own map is kept as it is.
+#[test]
+fn cli_report_counts_starts_replaced_by_tutte() {
+    let tmp = TempDir::new("cli_tutte_starts");
+    let input = crate::common::data_obj("camel_open");
+    let report = tmp.join("r.json");
+    let mut seen = Vec::new();
+    for init in ["lscm", "tutte"] {
+        let status = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+            .args(["param", "--solver", "global", "--init", init, "-q", "-o"])
+            .arg(tmp.join("out.obj"))
+            .arg("--report")
+            .arg(&report)
+            .arg(&input)
+            .status()
+            .expect("run foldfree");
+        assert!(status.success());
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(r["init"], init);
+        assert_eq!(r["flips"], 0);
+        seen.push((r["init_flips"].clone(), r["tutte_starts"].clone()));
+    }
+    assert!(
+        seen[0].0.as_u64().unwrap() > 0,
+        "LSCM no longer folds camel_open: {seen:?}"
+    );
+    let count = |i: usize, k: &str| seen[i].1[k].as_u64().unwrap();
+    assert_eq!(count(0, "folded"), 1, "{seen:?}");
+    assert_eq!(
+        count(0, "non_finite") + count(0, "boundary_crosses_itself"),
+        0
+    );
+    assert_eq!(seen[1].0, 0);
+    for k in ["folded", "non_finite", "boundary_crosses_itself"] {
+        assert_eq!(count(1, k), 0, "{seen:?}");
+    }
+}
+
 #[test]
 fn cli_solver_global_refuses_admm_only_flags() {
     let tmp = TempDir::new("cli_solver_global_flags");
