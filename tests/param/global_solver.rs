@@ -242,22 +242,29 @@ fn a_folded_start_is_refused() {
     assert!(err.is_err());
 }
 
+/// `foldfree param --solver global -q -o OUT --report TMP/report.json EXTRA INPUT`, which must
+/// succeed; its report.
+fn param_report(tmp: &TempDir, input: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let report = tmp.join("report.json");
+    let status = Command::new(env!("CARGO_BIN_EXE_foldfree"))
+        .args(["param", "--solver", "global", "-q", "-o"])
+        .arg(out)
+        .arg("--report")
+        .arg(&report)
+        .args(extra)
+        .arg(input)
+        .status()
+        .expect("run foldfree");
+    assert!(status.success());
+    serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
+}
+
 #[test]
 fn cli_solver_global_writes_a_flip_free_map_and_its_report() {
     let tmp = TempDir::new("cli_solver_global");
     let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/square_grid_10x10.obj");
-    let (out, report) = (tmp.join("grid.obj"), tmp.join("grid.json"));
-    let status = Command::new(env!("CARGO_BIN_EXE_foldfree"))
-        .args(["param", "--solver", "global", "--energy", "sd", "-q", "-o"])
-        .arg(&out)
-        .arg("--report")
-        .arg(&report)
-        .arg(&input)
-        .status()
-        .expect("run foldfree");
-    assert!(status.success());
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let out = tmp.join("grid.obj");
+    let r = param_report(&tmp, &input, &out, &["--energy", "sd"]);
     assert_eq!(r["solver"], "global");
     assert_eq!(r["init"], "tutte");
     assert_eq!(r["flips"], 0);
@@ -274,20 +281,9 @@ fn cli_solver_global_writes_a_flip_free_map_and_its_report() {
 fn cli_report_counts_starts_replaced_by_tutte() {
     let tmp = TempDir::new("cli_tutte_starts");
     let input = crate::common::data_obj("camel_open");
-    let report = tmp.join("r.json");
     let mut seen = Vec::new();
     for init in ["lscm", "tutte"] {
-        let status = Command::new(env!("CARGO_BIN_EXE_foldfree"))
-            .args(["param", "--solver", "global", "--init", init, "-q", "-o"])
-            .arg(tmp.join("out.obj"))
-            .arg("--report")
-            .arg(&report)
-            .arg(&input)
-            .status()
-            .expect("run foldfree");
-        assert!(status.success());
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let r = param_report(&tmp, &input, &tmp.join("out.obj"), &["--init", init]);
         assert_eq!(r["init"], init);
         assert_eq!(r["flips"], 0);
         seen.push((r["init_flips"].clone(), r["tutte_starts"].clone()));
