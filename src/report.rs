@@ -54,8 +54,9 @@ pub struct ParamReport {
     pub converged: Option<bool>,
     pub mu_rel: Option<f64>,
     pub init_flips: usize,
-    /// Maps a solver was to start from that were replaced by Tutte's embedding, by reason
-    /// (charts, for an atlas): the map the report's `init` names, or ADMM's result handed on.
+    /// Maps a solver was to start from that were replaced by Tutte's embedding, by reason,
+    /// over all charts: the map the report's `init` names, or ADMM's result handed on (one
+    /// chart can count more than once).
     pub tutte_starts: TutteStarts,
     /// Device time per kernel (`--profile`, Vulkan only).
     pub kernel_times: Option<crate::param::admm::vulkan::KernelTimes>,
