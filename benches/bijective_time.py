@@ -7,14 +7,14 @@ Usage:
 
 For each mesh (a folder stands for its `*.obj`, sorted), `--reps` rounds of, one after the other:
   BIN param MESH -o T.obj --report T.json -q                                   (bijective, default)
-  BASE param MESH ... (the same, when --base is given: a change measured beside its parent)
   BIN param MESH ... --no-bijective --tuning T.toml   with [cut] overlap_splits = 0 (unconstrained)
+  BASE param MESH ... (both again, when --base is given: a change measured beside its parent)
 and the median of each mode's report `seconds_solve` (the solver alone: cutting, packing and I/O
 are the same in both modes). Interleaving per mesh is what makes the ratio trustworthy on this
 box: whole sweeps run minutes apart drift by up to ~25 % per mesh (BENCHMARKS.md, bijective
 round 3). One JSON line per mesh goes to FILE as it finishes: seconds, iterations, SD energy and
 `boundary_self_intersections` of each mode, and `ratio` (= bijective / unconstrained; `ratio_base`
-likewise for BASE). The summary (stdout) gives the medians of the ratios and the worst meshes.
+= BASE's bijective / BASE's unconstrained). The summary (stdout) gives the medians of the ratios and the worst meshes.
 """
 import argparse
 import json
@@ -71,10 +71,10 @@ def main():
     with tempfile.TemporaryDirectory() as tmp, open(a.out, "w") as out:
         toml = Path(tmp) / "unconstrained.toml"
         toml.write_text("[cut]\noverlap_splits = 0\n")
-        modes = [("bijective", a.bin, extra)]
+        unconstrained = [*extra, "--no-bijective", "--tuning", str(toml)]
+        modes = [("bijective", a.bin, extra), ("unconstrained", a.bin, unconstrained)]
         if a.base:
-            modes.append(("base", a.base, extra))
-        modes.append(("unconstrained", a.bin, [*extra, "--no-bijective", "--tuning", str(toml)]))
+            modes += [("base", a.base, extra), ("base_unconstrained", a.base, unconstrained)]
         for i, mesh in enumerate(meshes):
             runs = {m: [] for m, _, _ in modes}
             for _ in range(a.reps):
@@ -91,9 +91,11 @@ def main():
                         "sd": runs[m][0]["sd"],
                         "crossings": runs[m][0]["crossings"],
                     }
-            u = row.get("unconstrained", {}).get("seconds")
-            for m, key in (("bijective", "ratio"), ("base", "ratio_base")):
-                s = row.get(m, {}).get("seconds")
+            for m, un, key in (
+                ("bijective", "unconstrained", "ratio"),
+                ("base", "base_unconstrained", "ratio_base"),
+            ):
+                s, u = row.get(m, {}).get("seconds"), row.get(un, {}).get("seconds")
                 if s is not None and u:
                     row[key] = s / u
             rows.append(row)
@@ -106,7 +108,10 @@ def main():
         if vals:
             print(f"{key}: median {statistics.median(vals):.3f} over {len(vals)} meshes, "
                   f"max {max(vals):.2f}, above 1.5: {sum(v > 1.5 for v in vals)}")
-    tot = {m: sum(r[m]["seconds"] for r in rows if m in r) for m in ("bijective", "base", "unconstrained")}
+    tot = {
+        m: sum(r[m]["seconds"] for r in rows if m in r)
+        for m in ("bijective", "unconstrained", "base", "base_unconstrained")
+    }
     print("total seconds_solve: " + ", ".join(f"{m} {s:.2f}" for m, s in tot.items() if s))
     worst = sorted((r for r in rows if "ratio" in r), key=lambda r: -r["ratio"])[:8]
     for r in worst:
