@@ -793,6 +793,17 @@ fn bad_triangles(
         .collect()
 }
 
+/// [`bad_triangles`] of a realised partition's output, on its own planes.
+fn realised_bad(r: &outline::Realised, diag: f64) -> Vec<(usize, Bad)> {
+    bad_triangles(
+        &r.polygons.positions,
+        &r.triangles,
+        &r.triangle_region,
+        &r.planes,
+        diag,
+    )
+}
+
 /// The headline error: the mean over input vertices of their distance to their regions'
 /// planes (a vertex on several regions counts the mean over them), and the largest.
 fn input_distances(pos: &[V3], regions_at: &[Vec<u32>], planes: &[Plane]) -> (f64, f64) {
@@ -859,13 +870,7 @@ fn realise(
         }
     }
     // The independent count of what the construction rules out.
-    let bad = bad_triangles(
-        &r.polygons.positions,
-        &r.triangles,
-        &r.triangle_region,
-        &r.planes,
-        diag,
-    );
+    let bad = realised_bad(&r, diag);
     let flipped = bad.iter().filter(|b| b.1 == Bad::Flipped).count();
     let degenerate = bad.len() - flipped;
     let mut notes = Vec::new();

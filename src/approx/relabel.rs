@@ -203,7 +203,7 @@ fn regions_connected(topo: &crate::mesh::Topology, labels: &[u32]) -> bool {
 mod tests {
     use super::super::geom::{self, face_normals_areas};
     use super::*;
-    use crate::approx::bad_triangles;
+    use crate::approx::realised_bad;
     use crate::init::test_grid::{bumpy, id};
     use crate::mesh::{Topology, TriMesh};
     use std::path::Path;
@@ -250,13 +250,7 @@ mod tests {
         .0;
         assert!(after < before, "{before} → {after}");
         // The output is built on the same planes and passes the independent check.
-        let bad = bad_triangles(
-            &r.polygons.positions,
-            &r.triangles,
-            &r.triangle_region,
-            &r.planes,
-            diag,
-        );
+        let bad = realised_bad(&r, diag);
         assert!(bad.is_empty());
         assert_eq!(r.polygons.polygons.len(), 2);
         assert!(regions_connected(&topo, &r.labels));

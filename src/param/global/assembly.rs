@@ -103,45 +103,27 @@ pub struct Pattern {
 impl Pattern {
     /// Builds the pattern of `mesh`: vertex blocks for every pair that shares a face.
     pub fn new(mesh: &TriMesh) -> Result<Pattern, SolveError> {
-        Self::from_faces(mesh.positions.len(), &mesh.faces)
-    }
-
-    /// The pattern of `faces` over `nv` vertices.
-    pub fn from_faces(nv: usize, faces: &[[u32; 3]]) -> Result<Pattern, SolveError> {
-        Self::with_extra(nv, faces, &[])
-    }
-
-    /// The pattern of `faces` and `extra` over `nv` vertices, set up for `faces` (a chart with
-    /// its scaffold, and blocks reserved for the triangles a re-triangulation may bring:
-    /// [`Pattern::rebind`]). Corners from `nv` on (the scaffold's frame) are fixed: they are
-    /// not unknowns, so they have no rows, and a scaffold triangle only couples the chart
-    /// vertices among its corners: re-triangulations that only move the long triangles to the
-    /// frame leave the pattern unchanged.
-    pub fn with_extra(
-        nv: usize,
-        faces: &[[u32; 3]],
-        extra: &[[u32; 3]],
-    ) -> Result<Pattern, SolveError> {
-        let blocks = BlockPattern::with_extra(nv, faces, extra);
-        let diag = (0..2 * nv)
-            .map(|i| blocks.diag((i / 2) as u32, i % 2))
-            .collect();
-        let matrix = blocks.matrix(vec![0.0; blocks.indices.len()]);
-        Ok(Pattern {
-            matrix,
-            blocks,
-            diag,
-        })
+        Ok(Self::from_blocks(BlockPattern::new(
+            mesh.positions.len(),
+            &mesh.faces,
+        )))
     }
 
     /// The pattern of this one's faces (`base`, those it is set up for) followed by `faces`,
-    /// with blocks reserved for `extra`: [`Pattern::with_extra`] of `base ++ faces`, built
-    /// from this one ([`BlockPattern::extended`]: only the rows `faces` add blocks to are
-    /// merged — a scaffold's, on the chart's pattern).
+    /// with blocks reserved for `extra` (a chart with its scaffold, and blocks for the
+    /// triangles a re-triangulation may bring: [`Pattern::rebind`]), built from this one
+    /// ([`BlockPattern::extended`]: only the rows `faces` add blocks to are merged). Corners
+    /// from the chart's vertex count on (the scaffold's frame) are fixed: they are not
+    /// unknowns, so they have no rows, and a scaffold triangle only couples the chart vertices
+    /// among its corners: re-triangulations that only move the long triangles to the frame
+    /// leave the pattern unchanged.
     pub fn extended(&self, base: &[[u32; 3]], faces: &[[u32; 3]], extra: &[[u32; 3]]) -> Pattern {
-        let blocks = self.blocks.extended(base, faces, extra);
-        let nv = blocks.n / 2;
-        let diag = (0..2 * nv)
+        Self::from_blocks(self.blocks.extended(base, faces, extra))
+    }
+
+    /// The matrix of `blocks` (values zero) and its diagonal entries.
+    fn from_blocks(blocks: BlockPattern<2, 3>) -> Pattern {
+        let diag = (0..blocks.n)
             .map(|i| blocks.diag((i / 2) as u32, i % 2))
             .collect();
         let matrix = blocks.matrix(vec![0.0; blocks.indices.len()]);
