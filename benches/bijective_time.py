@@ -15,6 +15,13 @@ box: whole sweeps run minutes apart drift by up to ~25 % per mesh (BENCHMARKS.md
 round 3). One JSON line per mesh goes to FILE as it finishes: seconds, iterations, SD energy and
 `boundary_self_intersections` of each mode, and `ratio` (= bijective / unconstrained; `ratio_base`
 = BASE's bijective / BASE's unconstrained). The summary (stdout) gives the medians of the ratios and the worst meshes.
+
+The issue-21 acceptance is checked on the way: the first bijective OBJ of each mesh is re-read by
+`sweep.py`'s independent check (`check_overlaps`, `check_flips`: crossing pairs of UV boundary
+edges and non-positive UV triangles, not the report's counts), the atlas report's
+`overlap_splits` (seams added to split an overlapping chart) is kept, and the summary counts the
+meshes whose unconstrained map had no crossing and whose bijective energy (the optimised one:
+`energy` names it) is more than 0.5 % above it.
 """
 import argparse
 import json
@@ -23,6 +30,9 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from sweep import check_obj  # noqa: E402  (the corpus harness's independent UV checks)
 
 
 def collect(inputs):
@@ -33,9 +43,10 @@ def collect(inputs):
     return out
 
 
-def run(binary, mesh, extra, tmp, timeout):
+def run(binary, mesh, extra, tmp, timeout, check=False):
     obj, rep = Path(tmp) / "o.obj", Path(tmp) / "r.json"
     rep.unlink(missing_ok=True)
+    obj.unlink(missing_ok=True)
     cmd = [binary, "param", str(mesh), "-o", str(obj), "--report", str(rep), "-q", *extra]
     try:
         p = subprocess.run(cmd, capture_output=True, timeout=timeout or None)
@@ -44,12 +55,20 @@ def run(binary, mesh, extra, tmp, timeout):
     if p.returncode != 0 or not rep.exists():
         return None
     r = json.loads(rep.read_text())
-    return {
+    energy = r.get("energy")
+    out = {
         "seconds": r.get("seconds_solve"),
         "iterations": r.get("iterations"),
         "sd": r.get("metrics", {}).get("sd_energy", r.get("sd_energy")),
         "crossings": r.get("boundary_self_intersections"),
+        "solver_path": r.get("solver_path"),
+        "energy": energy,
+        "value": r.get("mips_energy" if energy == "mips" else "sd_energy"),
+        "overlap_splits": (r.get("atlas") or {}).get("overlap_splits", 0),
     }
+    if check:
+        out.update(check_obj(obj))
+    return out
 
 
 def main():
@@ -77,9 +96,9 @@ def main():
             modes += [("base", a.base, extra), ("base_unconstrained", a.base, unconstrained)]
         for i, mesh in enumerate(meshes):
             runs = {m: [] for m, _, _ in modes}
-            for _ in range(a.reps):
+            for rep in range(a.reps):
                 for m, binary, args in modes:
-                    r = run(binary, mesh, args, tmp, a.timeout)
+                    r = run(binary, mesh, args, tmp, a.timeout, check=rep == 0 and m == "bijective")
                     if r is not None:
                         runs[m].append(r)
             row = {"mesh": mesh.stem, "path": str(mesh)}
@@ -89,7 +108,7 @@ def main():
                         "seconds": statistics.median(r["seconds"] for r in runs[m]),
                         "iterations": runs[m][0]["iterations"],
                         "sd": runs[m][0]["sd"],
-                        "crossings": runs[m][0]["crossings"],
+                        **{k: v for k, v in runs[m][0].items() if k != "seconds"},
                     }
             for m, un, key in (
                 ("bijective", "unconstrained", "ratio"),
@@ -113,6 +132,16 @@ def main():
         for m in ("bijective", "unconstrained", "base", "base_unconstrained")
     }
     print("total seconds_solve: " + ", ".join(f"{m} {s:.2f}" for m, s in tot.items() if s))
+    bij = [r for r in rows if "bijective" in r]
+    print(f"written (bijective): {len(bij)} of {len(rows)}; independent check: "
+          f"{sum(r['bijective'].get('check_overlaps', 0) > 0 for r in bij)} with crossings, "
+          f"{sum(r['bijective'].get('check_flips', 0) > 0 for r in bij)} with flips; "
+          f"overlap splits added on {sum((r['bijective'].get('overlap_splits') or 0) > 0 for r in bij)}")
+    clean = [r for r in bij if "unconstrained" in r and r["unconstrained"].get("check_overlaps", r["unconstrained"]["crossings"]) == 0]
+    cost = sorted(((r["bijective"]["value"] / r["unconstrained"]["value"] - 1, r["mesh"]) for r in clean), reverse=True)
+    if cost:
+        print(f"unconstrained map without crossings: {len(clean)}; bijective energy > 0.5 % above it: "
+              f"{sum(c > 0.005 for c, _ in cost)}; largest {cost[0][0] * 100:+.3f} % ({cost[0][1]})")
     worst = sorted((r for r in rows if "ratio" in r), key=lambda r: -r["ratio"])[:8]
     for r in worst:
         b, u = r["bijective"], r["unconstrained"]
