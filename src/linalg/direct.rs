@@ -30,8 +30,8 @@ use faer::linalg::cholesky::llt::factor::LltError;
 use faer::perm::PermRef;
 use faer::sparse::linalg::amd;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
-    SymmetricOrdering,
+    factorize_symbolic_cholesky, simplicial, supernodal, CholeskySymbolicParams, LltRef,
+    SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -89,6 +89,94 @@ pub struct CholeskySymbolic {
     indptr: Vec<usize>,
     indices: Vec<usize>,
     symbolic: Arc<SymbolicCholesky<usize>>,
+    /// The permuted matrix `P A Pᵀ`'s one triangle, the one the numeric factorisation reads.
+    permuted: Arc<Permuted>,
+}
+
+/// Where each stored entry of `A` goes in the triangle of `P A Pᵀ` that faer's numeric
+/// factorisation reads (lower for a supernodal factor, upper for a simplicial one). faer's
+/// own `factorize_numeric_llt` builds that matrix again for every factorisation (counting
+/// sort of the permuted entries, a fifth or more of a 2D-mesh system's factorisation); the
+/// structure depends only on the pattern and the ordering, so it is built once here and each
+/// factorisation only scatters the values.
+#[derive(Debug)]
+struct Permuted {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    /// Per stored entry of `A` (CSR order): its position in `row_idx`, or `usize::MAX` for an
+    /// entry of the triangle that is not read (below the diagonal of a CSR row).
+    scatter: Vec<usize>,
+}
+
+impl Permuted {
+    /// The structure of `P A Pᵀ`'s `lower` (or upper) triangle for the symmetric CSR pattern
+    /// (`indptr`, `indices`), whose upper triangle per row is read, and the inverse
+    /// permutation `inv` (old index → new; `None`: identity). Rows within a column ascend.
+    fn new(indptr: &[usize], indices: &[usize], inv: Option<&[usize]>, lower: bool) -> Permuted {
+        let n = indptr.len() - 1;
+        let new = |i: usize| inv.map_or(i, |p| p[i]);
+        // (column, row) in the permuted matrix of stored entry k, when read.
+        let place = |r: usize, c: usize| -> Option<(usize, usize)> {
+            if c < r {
+                return None;
+            }
+            let (a, b) = (new(r), new(c));
+            let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+            Some(if lower { (lo, hi) } else { (hi, lo) })
+        };
+        let mut col_ptr = vec![0usize; n + 1];
+        for r in 0..n {
+            for &c in &indices[indptr[r]..indptr[r + 1]] {
+                if let Some((col, _)) = place(r, c) {
+                    col_ptr[col + 1] += 1;
+                }
+            }
+        }
+        for j in 0..n {
+            col_ptr[j + 1] += col_ptr[j];
+        }
+        let nnz = col_ptr[n];
+        let mut next = col_ptr.clone();
+        let mut row_idx = vec![0usize; nnz];
+        let mut source = vec![0usize; nnz];
+        for r in 0..n {
+            for (k, &c) in indices
+                .iter()
+                .enumerate()
+                .take(indptr[r + 1])
+                .skip(indptr[r])
+            {
+                if let Some((col, row)) = place(r, c) {
+                    row_idx[next[col]] = row;
+                    source[next[col]] = k;
+                    next[col] += 1;
+                }
+            }
+        }
+        // Ascending rows per column (faer's checked constructor wants them sorted).
+        for j in 0..n {
+            let range = col_ptr[j]..col_ptr[j + 1];
+            let mut pairs: Vec<(usize, usize)> = row_idx[range.clone()]
+                .iter()
+                .copied()
+                .zip(source[range.clone()].iter().copied())
+                .collect();
+            pairs.sort_unstable();
+            for (t, (row, k)) in range.zip(pairs) {
+                row_idx[t] = row;
+                source[t] = k;
+            }
+        }
+        let mut scatter = vec![usize::MAX; indices.len()];
+        for (t, &k) in source.iter().enumerate() {
+            scatter[k] = t;
+        }
+        Permuted {
+            col_ptr,
+            row_idx,
+            scatter,
+        }
+    }
 }
 
 /// The square CSR structure of `a`, checked (the row pointer rebased to start at 0).
@@ -199,11 +287,19 @@ impl CholeskySymbolic {
         };
         let symbolic = factorize_symbolic_cholesky(pattern, Side::Lower, ordering, params)
             .map_err(|e| faer_error("symbolic factorisation", e))?;
+        let lower = matches!(symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_));
+        let permuted = Permuted::new(
+            &indptr,
+            indices,
+            symbolic.perm().map(|p| p.arrays().1),
+            lower,
+        );
         Ok(CholeskySymbolic {
             n,
             indptr: indptr.to_vec(),
             indices: indices.to_vec(),
             symbolic: Arc::new(symbolic),
+            permuted: Arc::new(permuted),
         })
     }
 
@@ -221,29 +317,46 @@ impl CholeskySymbolic {
                     .into(),
             });
         }
-        let pattern = SymbolicSparseColMatRef::new_checked(self.n, self.n, &indptr, None, indices);
-        let mat = SparseColMatRef::new(pattern, data);
+        let p = &*self.permuted;
+        let mut permuted_values = vec![0.0; p.row_idx.len()];
+        for (&t, &v) in p.scatter.iter().zip(data) {
+            if t != usize::MAX {
+                permuted_values[t] = v;
+            }
+        }
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(self.n, self.n, &p.col_ptr, None, &p.row_idx);
+        let mat = SparseColMatRef::new(pattern, &permuted_values);
         let mut values = vec![0.0; self.symbolic.len_val()];
         let scratch = self
             .symbolic
             .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
         let mut mem =
             MemBuffer::try_new(scratch).map_err(|e| faer_error("factorisation workspace", e))?;
-        self.symbolic
-            .factorize_numeric_llt::<f64>(
+        let stack = MemStack::new(&mut mem);
+        match self.symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => supernodal::factorize_supernodal_numeric_llt(
                 &mut values,
                 mat,
-                Side::Lower,
                 Default::default(),
+                s,
                 Par::Seq,
-                MemStack::new(&mut mem),
+                stack,
                 Default::default(),
-            )
-            .map_err(|e| match e {
-                LltError::NonPositivePivot { index } => {
-                    DirectError::NotPositiveDefinite { pivot: index }
-                }
-            })?;
+            ),
+            SymbolicCholeskyRaw::Simplicial(s) => simplicial::factorize_simplicial_numeric_llt(
+                &mut values,
+                mat,
+                Default::default(),
+                s,
+                stack,
+            ),
+        }
+        .map_err(|e| match e {
+            LltError::NonPositivePivot { index } => {
+                DirectError::NotPositiveDefinite { pivot: index }
+            }
+        })?;
         Ok(Cholesky {
             n: self.n,
             symbolic: self.symbolic.clone(),
@@ -425,13 +538,9 @@ mod tests {
         }
     }
 
-    /// A matrix of 2×2 blocks (a vertex-graph Laplacian ⊗ an SPD 2×2, shifted): the block
-    /// ordering keeps each block's two unknowns adjacent, and its supernodal factor solves
-    /// like the scalar AMD one.
-    #[test]
-    fn blocked_ordering_solves_like_the_scalar_one() {
-        // A 6×5 grid of vertices, 4-neighbour graph.
-        let (w, h) = (6, 5);
+    /// A matrix of 2×2 blocks on a `w`×`h` grid of vertices (the 4-neighbour graph's
+    /// Laplacian ⊗ an SPD 2×2, shifted to be positive definite).
+    fn block_grid(w: usize, h: usize) -> CsMat<f64> {
         let nv = w * h;
         let k = [[2.0, 0.5], [0.5, 1.0]];
         let mut e = Vec::new();
@@ -462,7 +571,77 @@ mod tests {
                 block(v, v, deg);
             }
         }
-        let a = csr(2 * nv, &e);
+        csr(2 * nv, &e)
+    }
+
+    /// The permuted triangle built once per pattern ([`Permuted`]) is the matrix faer's own
+    /// numeric factorisation permutes each time: the factors agree bit for bit, for the
+    /// supernodal (blocked) and the simplicial (scalar AMD, a small matrix) factorisation.
+    #[test]
+    fn permuted_once_factors_like_faer_permuting_each_time() {
+        // The grid with values that differ per entry (still symmetric), and a small matrix
+        // for which faer's heuristic picks the simplicial factorisation.
+        let grid = block_grid(9, 7);
+        let mut t = TriMat::new((grid.rows(), grid.cols()));
+        for (v, (i, j)) in grid.iter() {
+            let bump = if i == j {
+                0.0
+            } else {
+                1e-3 * ((i + j) % 5) as f64
+            };
+            t.add_triplet(i, j, *v - bump);
+        }
+        let grid = t.to_csr();
+        let small = csr(
+            4,
+            &[
+                (0, 0, 2.0),
+                (0, 3, 1.0),
+                (1, 1, 3.0),
+                (2, 2, 1.0),
+                (3, 0, 1.0),
+                (3, 3, 4.0),
+            ],
+        );
+        for (sym, m, supernodal) in [
+            (CholeskySymbolic::blocked(&grid, 2).unwrap(), &grid, true),
+            (CholeskySymbolic::new(&small).unwrap(), &small, false),
+        ] {
+            let raw = sym.symbolic.raw();
+            assert_eq!(
+                matches!(raw, SymbolicCholeskyRaw::Supernodal(_)),
+                supernodal
+            );
+            let ours = sym.factor(m).unwrap();
+            let (indptr, indices, data) = csr_parts(m).unwrap();
+            let pattern =
+                SymbolicSparseColMatRef::new_checked(sym.n, sym.n, &indptr, None, indices);
+            let mut values = vec![0.0; sym.symbolic.len_val()];
+            let scratch = sym
+                .symbolic
+                .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
+            let mut mem = MemBuffer::try_new(scratch).unwrap();
+            sym.symbolic
+                .factorize_numeric_llt::<f64>(
+                    &mut values,
+                    SparseColMatRef::new(pattern, data),
+                    Side::Lower,
+                    Default::default(),
+                    Par::Seq,
+                    MemStack::new(&mut mem),
+                    Default::default(),
+                )
+                .unwrap();
+            assert_eq!(ours.values, values);
+        }
+    }
+
+    /// A matrix of 2×2 blocks ([`block_grid`]): the block ordering keeps each block's two
+    /// unknowns adjacent, and its supernodal factor solves like the scalar AMD one.
+    #[test]
+    fn blocked_ordering_solves_like_the_scalar_one() {
+        let nv = 6 * 5;
+        let a = block_grid(6, 5);
         let b: Vec<f64> = (0..2 * nv).map(|i| ((i * 7) % 11) as f64 - 5.0).collect();
         let blocked = CholeskySymbolic::blocked(&a, 2).unwrap();
         let perm = blocked.symbolic.perm().unwrap();
