@@ -23,14 +23,15 @@
 //! meshes, which are returned as they are (counted in [`InitReport::flips`]).
 #![forbid(unsafe_code)]
 
-use sprs::{CsMat, TriMat};
+use sprs::CsMat;
 
 use super::vec3::{cross, dot, norm, sub};
 use super::{
     check_faces, check_input, count_flips, default_solve_options, orient_ccw, unique_edges,
     unreached, InitReport,
 };
-use crate::linalg::direct::{Cholesky, LinearSolver};
+use crate::linalg::direct::{CholeskySymbolic, LinearSolver};
+use crate::linalg::pattern::BlockPattern;
 use crate::linalg::sparse::relative_residual;
 use crate::linalg::SolveError;
 use crate::linalg::{
@@ -129,7 +130,8 @@ fn lscm_solve(
     if lost > 0 {
         return Err(SolveError::InvalidInput { what: format!("{lost} vertices lie in components without a pinned vertex (the mesh is not connected)") });
     }
-    // Unknowns: u of free vertex r at 2r, v at 2r + 1.
+    // Unknowns: u of free vertex r at 2r, v at 2r + 1; the pins come after the free vertices
+    // (fixed corners of the block pattern: no rows, their columns go to the right-hand side).
     let mut index = vec![u32::MAX; n];
     let mut free = Vec::new();
     for v in 0..n {
@@ -138,27 +140,34 @@ fn lscm_solve(
             free.push(v as u32);
         }
     }
-    let mut pinned_uv = vec![[0.0; 2]; n];
-    pinned_uv[pb as usize] = [d, 0.0];
-    let m = 2 * free.len();
-    let mut tri = TriMat::with_capacity((m, m), 30 * faces.len());
+    let nf = free.len();
+    index[pa as usize] = nf as u32;
+    index[pb as usize] = nf as u32 + 1;
+    // UVs of the pins, by their index − nf.
+    let pinned_uv = [[0.0, 0.0], [d, 0.0]];
+    let local: Vec<[u32; 3]> = faces.iter().map(|f| f.map(|v| index[v as usize])).collect();
+    // Q has a 2×2 block per pair of vertices sharing a face: assembled through the block
+    // pattern's precomputed slots, with no sort of triplets.
+    let pattern = BlockPattern::<2, 3>::new(nf, &local);
+    let m = pattern.n;
+    let mut data = vec![0.0; pattern.indices.len()];
     let mut rhs = vec![0.0; m];
-    // Adds q to Q[(vertex i, coordinate ci)][(vertex j, coordinate cj)] (ci, cj: 0 = u, 1 = v).
-    let mut add = |tri: &mut TriMat<f64>, i: usize, ci: usize, j: usize, cj: usize, q: f64| {
-        if index[i] == u32::MAX {
-            return;
-        }
-        let row = 2 * index[i] as usize + ci;
-        if index[j] != u32::MAX {
-            tri.add_triplet(row, 2 * index[j] as usize + cj, q);
-        } else {
-            // Pinned column moves to the right-hand side: b_f −= Q_fp x_p.
-            rhs[row] -= q * pinned_uv[j][cj];
-        }
-    };
-    for face in faces {
-        let v = [face[0] as usize, face[1] as usize, face[2] as usize];
-        let p = [positions[v[0]], positions[v[1]], positions[v[2]]];
+    for (fi, (face, lf)) in faces.iter().zip(&local).enumerate() {
+        let slot = &pattern.slot[fi];
+        // Adds q to Q[(corner i, coordinate ci)][(corner j, coordinate cj)] (0 = u, 1 = v).
+        let mut add = |i: usize, ci: usize, j: usize, cj: usize, q: f64| {
+            let (a, b) = (lf[i], lf[j]);
+            if a as usize >= nf {
+                return;
+            }
+            if b as usize >= nf {
+                // Pinned column moves to the right-hand side: b_f −= Q_fp x_p.
+                rhs[2 * a as usize + ci] -= q * pinned_uv[b as usize - nf][cj];
+            } else {
+                data[pattern.pos(a, ci, slot[i][j], cj)] += q;
+            }
+        };
+        let p = face.map(|v| positions[v as usize]);
         let area2 = norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
         let longest2 = (0..3)
             .map(|c| dot(sub(p[(c + 1) % 3], p[c]), sub(p[(c + 1) % 3], p[c])))
@@ -167,25 +176,25 @@ fn lscm_solve(
         // ½∫_T|∇u|² = ¼ Σ_k cot θ_k (u_i − u_j)², θ_k the angle opposite edge ij.
         if area2 > 1e-14 * longest2 {
             for k in 0..3 {
-                let (i, j) = (v[(k + 1) % 3], v[(k + 2) % 3]);
-                let (a, b) = (sub(p[(k + 1) % 3], p[k]), sub(p[(k + 2) % 3], p[k]));
+                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                let (a, b) = (sub(p[i], p[k]), sub(p[j], p[k]));
                 // w = ½ cot θ_k = ½ (a·b)/|a×b|
                 let w = 0.5 * dot(a, b) / area2;
                 for c in 0..2 {
-                    add(&mut tri, i, c, i, c, w);
-                    add(&mut tri, j, c, j, c, w);
-                    add(&mut tri, i, c, j, c, -w);
-                    add(&mut tri, j, c, i, c, -w);
+                    add(i, c, i, c, w);
+                    add(j, c, j, c, w);
+                    add(i, c, j, c, -w);
+                    add(j, c, i, c, -w);
                 }
             }
         }
         // Area part: −A_T = −½ Σ_{directed edges a→b} (u_a v_b − u_b v_a).
         for k in 0..3 {
-            let (a, b) = (v[k], v[(k + 1) % 3]);
-            add(&mut tri, a, 0, b, 1, -0.5);
-            add(&mut tri, b, 1, a, 0, -0.5);
-            add(&mut tri, b, 0, a, 1, 0.5);
-            add(&mut tri, a, 1, b, 0, 0.5);
+            let (a, b) = (k, (k + 1) % 3);
+            add(a, 0, b, 1, -0.5);
+            add(b, 1, a, 0, -0.5);
+            add(b, 0, a, 1, 0.5);
+            add(a, 1, b, 0, 0.5);
         }
     }
     let mut uv = vec![[0.0; 2]; n];
@@ -198,8 +207,8 @@ fn lscm_solve(
         preconditioner: opts.preconditioner,
     };
     if m > 0 {
-        // Interior edges' area terms cancel to exact zeros: drop them (half the entries).
-        let q = drop_zeros(&tri.to_csr());
+        // Interior edges' area terms cancel to exact zeros (sums of ±½): drop them.
+        let q = drop_zeros(&pattern.matrix(data));
         let mut x = vec![0.0; m];
         // u and v of a vertex are interleaved: multigrid aggregates them as one node.
         let opts = match opts.preconditioner {
@@ -217,7 +226,11 @@ fn lscm_solve(
                 report.preconditioner = stats.preconditioner;
             }
             LinearSolver::Cholesky => {
-                Cholesky::new(&q)?.solve(&rhs, &mut x)?;
+                // Ordered as 2×2 blocks and factored supernodally, as the global solver's
+                // systems ([`CholeskySymbolic::blocked`]).
+                CholeskySymbolic::blocked(&q, 2)?
+                    .factor(&q)?
+                    .solve(&rhs, &mut x)?;
                 report.relative_residual = relative_residual(&q, &rhs, &x);
             }
         }

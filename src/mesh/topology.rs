@@ -22,6 +22,9 @@ pub struct Topology {
     pub vv_offsets: Vec<u32>,
     /// (2·#E) vertices sharing an edge with each vertex, ascending within a vertex.
     pub vv_neighbors: Vec<u32>,
+    /// (2·#E) the edge to each of those neighbours (`vv_neighbors[i]` is reached by edge
+    /// `vv_edges[i]`): graph searches over the edges need no edge lookup per step.
+    pub vv_edges: Vec<u32>,
     /// (#E) unique undirected edges `[v0, v1]` with `v0 < v1`, sorted lexicographically, so edge
     /// indices do not depend on face order.
     pub edges: Vec<[u32; 2]>,
@@ -93,7 +96,7 @@ impl Topology {
 
         let (vf_offsets, vf_faces) = vertex_faces(n, &mesh.faces);
         let (edges, edge_faces, face_edges) = build_edges(n, &mesh.faces, file)?;
-        let (vv_offsets, vv_neighbors) = vertex_neighbors(n, &edges);
+        let (vv_offsets, vv_neighbors, vv_edges) = vertex_neighbors(n, &edges);
 
         let mut interior_edges = Vec::new();
         let mut boundary_edges = Vec::new();
@@ -122,6 +125,7 @@ impl Topology {
             vf_faces,
             vv_offsets,
             vv_neighbors,
+            vv_edges,
             edges,
             edge_faces,
             face_edges,
@@ -153,6 +157,12 @@ impl Topology {
     pub fn neighbors(&self, v: u32) -> &[u32] {
         let v = v as usize;
         &self.vv_neighbors[self.vv_offsets[v] as usize..self.vv_offsets[v + 1] as usize]
+    }
+
+    /// The edges from `v` to its [`Topology::neighbors`], in the same order.
+    pub fn neighbor_edges(&self, v: u32) -> &[u32] {
+        let v = v as usize;
+        &self.vv_edges[self.vv_offsets[v] as usize..self.vv_offsets[v + 1] as usize]
     }
 
     /// Number of fans the faces around `v` form (faces joined through shared edges at `v`):
@@ -396,7 +406,7 @@ fn build_edges(n: usize, faces: &[[u32; 3]], file: &Path) -> Result<Edges, MeshE
 /// Vertex → neighbour CSR from the sorted edge list. Filling in edge order gives each vertex
 /// first its smaller neighbours (edges where it is `v1`, ascending `v0`), then its larger ones
 /// (edges where it is `v0`, ascending `v1`), so every list comes out sorted.
-fn vertex_neighbors(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>) {
+fn vertex_neighbors(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>, Vec<u32>) {
     let mut offsets = vec![0u32; n + 1];
     for &[a, b] in edges {
         offsets[a as usize + 1] += 1;
@@ -407,13 +417,16 @@ fn vertex_neighbors(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>) {
     }
     let mut cursor: Vec<u32> = offsets[..n].to_vec();
     let mut list = vec![0u32; 2 * edges.len()];
-    for &[a, b] in edges {
-        list[cursor[a as usize] as usize] = b;
-        cursor[a as usize] += 1;
-        list[cursor[b as usize] as usize] = a;
-        cursor[b as usize] += 1;
+    let mut via = vec![0u32; 2 * edges.len()];
+    for (e, &[a, b]) in edges.iter().enumerate() {
+        for (v, w) in [(a, b), (b, a)] {
+            let c = &mut cursor[v as usize];
+            list[*c as usize] = w;
+            via[*c as usize] = e as u32;
+            *c += 1;
+        }
     }
-    (offsets, list)
+    (offsets, list, via)
 }
 
 /// Union-find root with path halving.

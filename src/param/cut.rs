@@ -430,10 +430,7 @@ fn dijkstra(
         if d > dist[v as usize] {
             continue;
         }
-        for &w in topo.neighbors(v) {
-            let Some(e) = edge_index(topo, v, w) else {
-                continue;
-            };
+        for (&w, &e) in topo.neighbors(v).iter().zip(topo.neighbor_edges(v)) {
             let nd = d + weights[e as usize];
             if nd < dist[w as usize] {
                 dist[w as usize] = nd;
@@ -777,10 +774,7 @@ fn add_split_seam(topo: &Topology, weights: &[f64], cut: &mut [bool], sp: &Split
         if v != a && !inner(v) {
             continue; // only a and interior vertices are passed through
         }
-        for &w in topo.neighbors(v) {
-            let Some(e) = edge_index(topo, v, w) else {
-                continue;
-            };
+        for (&w, &e) in topo.neighbors(v).iter().zip(topo.neighbor_edges(v)) {
             if !edge_ok(e) || !(w == b || inner(w)) {
                 continue;
             }

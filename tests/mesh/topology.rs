@@ -42,6 +42,13 @@ fn check_invariants(mesh: &TriMesh, t: &Topology) {
         assert!(vf.iter().all(|&f| mesh.faces[f as usize].contains(&v)));
         let nb = t.neighbors(v);
         assert!(nb.windows(2).all(|w| w[0] < w[1]), "neighbours sorted");
+        for (&u, &e) in nb.iter().zip(t.neighbor_edges(v)) {
+            assert_eq!(
+                t.edges[e as usize],
+                [v.min(u), v.max(u)],
+                "edge to each neighbour"
+            );
+        }
         for &u in nb {
             let key = [v.min(u), v.max(u)];
             assert!(t.edges.binary_search(&key).is_ok());
