@@ -10,7 +10,7 @@ For each mesh (a folder stands for its `*.obj`, sorted), `--reps` rounds of, one
   BIN param MESH ... --no-bijective --tuning T.toml   with [cut] overlap_splits = 0 (unconstrained)
   BASE param MESH ... (both again, when --base is given: a change measured beside its parent)
 and the median of each mode's report `seconds_solve` (the solver alone: cutting, packing and I/O
-are the same in both modes). Interleaving per mesh is what makes the ratio trustworthy on this
+are the same in both modes), `seconds` (the whole run) and the atlas's `seconds_cut`. Interleaving per mesh is what makes the ratio trustworthy on this
 box: whole sweeps run minutes apart drift by up to ~25 % per mesh (BENCHMARKS.md, bijective
 round 3). One JSON line per mesh goes to FILE as it finishes: seconds, iterations, SD energy and
 `boundary_self_intersections` of each mode, and `ratio` (= bijective / unconstrained; `ratio_base`
@@ -58,6 +58,8 @@ def run(binary, mesh, extra, tmp, timeout, check=False):
     energy = r.get("energy")
     out = {
         "seconds": r.get("seconds_solve"),
+        "seconds_total": r.get("seconds"),
+        "seconds_cut": (r.get("atlas") or {}).get("seconds_cut"),
         "iterations": r.get("iterations"),
         "sd": r.get("metrics", {}).get("sd_energy", r.get("sd_energy")),
         "crossings": r.get("boundary_self_intersections"),
@@ -104,11 +106,12 @@ def main():
             row = {"mesh": mesh.stem, "path": str(mesh)}
             for m in runs:
                 if runs[m]:
+                    # Times: medians over the rounds; the rest from the first round.
                     row[m] = {
-                        "seconds": statistics.median(r["seconds"] for r in runs[m]),
-                        "iterations": runs[m][0]["iterations"],
-                        "sd": runs[m][0]["sd"],
-                        **{k: v for k, v in runs[m][0].items() if k != "seconds"},
+                        **runs[m][0],
+                        **{k: statistics.median(r[k] for r in runs[m])
+                           for k in ("seconds", "seconds_total", "seconds_cut")
+                           if runs[m][0][k] is not None},
                     }
             for m, un, key in (
                 ("bijective", "unconstrained", "ratio"),
@@ -132,6 +135,9 @@ def main():
         for m in ("bijective", "unconstrained", "base", "base_unconstrained")
     }
     print("total seconds_solve: " + ", ".join(f"{m} {s:.2f}" for m, s in tot.items() if s))
+    for key in ("seconds_total", "seconds_cut"):
+        tot = {m: sum(r[m].get(key) or 0 for r in rows if m in r) for m in ("bijective", "base")}
+        print(f"total {key} (report), bijective: " + ", ".join(f"{m} {s:.2f}" for m, s in tot.items() if s))
     bij = [r for r in rows if "bijective" in r]
     print(f"written (bijective): {len(bij)} of {len(rows)}; independent check: "
           f"{sum(r['bijective'].get('check_overlaps', 0) > 0 for r in bij)} with crossings, "
