@@ -10,7 +10,9 @@ use crate::init::{initial_map, InitMethod};
 use crate::mesh::{self, Topology, TriMesh};
 use crate::metrics;
 use crate::param::job::{ParamJob, ParamOutput};
-use crate::param::map::{compute_map, MapOutput, OnDevice, Progress, SolverChoice, SolverPath};
+use crate::param::map::{
+    compute_map, compute_map_from, MapOutput, OnDevice, Progress, SolverChoice, SolverPath,
+};
 use crate::param::AdmmOptions;
 use crate::report::ParamReport;
 use crate::Result;
@@ -35,8 +37,11 @@ pub(crate) fn run_atlas(
     let t_cut = Instant::now();
     let mut cutm = cut::cut_to_disks(&input, topo, &job.cut_options, &job.input)?;
     let mut extra = Vec::new();
+    // The charts' LSCM maps, kept across the seam loop (a seam leaves the other charts as
+    // they were) and for the start maps of the charts the loop ends with.
+    let mut lscm = LscmCache::default();
     while extra.len() < job.cut_options.extra_seams {
-        match most_shrunk_vertex(&cutm, &job.input)? {
+        match most_shrunk_vertex(&cutm, &job.input, &mut lscm)? {
             // The same vertex again means its seam did not help: stop (a large
             // `extra_seams` otherwise re-cut the same seam for ever).
             Some((v, ratio)) if ratio > job.cut_options.stretch_limit && !extra.contains(&v) => {
@@ -68,9 +73,20 @@ pub(crate) fn run_atlas(
         for (c, faces) in cutm.charts.iter().enumerate() {
             let (sub, global) = cutm.chart_mesh(faces);
             let sub_topo = Topology::build(&sub, &job.input)?;
-            let map = match cache.remove(faces) {
-                Some(m) => m,
-                None => compute_map(
+            let map = match (cache.remove(faces), lscm.take(faces, &global)) {
+                (Some(m), _) => m,
+                (None, Some(Some(uv))) if job.init == InitMethod::Lscm => compute_map_from(
+                    &sub,
+                    &sub_topo,
+                    uv,
+                    Instant::now(),
+                    solver,
+                    job.bijective,
+                    admm,
+                    device.as_ref(),
+                    progress,
+                )?,
+                (None, _) => compute_map(
                     &sub,
                     &sub_topo,
                     job.init,
@@ -384,15 +400,24 @@ fn overlap_splits(
 fn most_shrunk_vertex(
     cutm: &crate::param::cut::CutMesh,
     file: &Path,
+    lscm: &mut LscmCache,
 ) -> Result<Option<(u32, f64)>> {
     let mut worst: Option<(u32, f64)> = None;
+    let mut kept = LscmCache::default();
     for faces in &cutm.charts {
         if faces.len() < 2 {
             continue;
         }
         let (sub, global) = cutm.chart_mesh(faces);
-        let sub_topo = Topology::build(&sub, file)?;
-        let Ok(uv) = initial_map(&sub, &sub_topo, InitMethod::Lscm) else {
+        let uv = match lscm.take(faces, &global) {
+            Some(uv) => uv,
+            None => {
+                let sub_topo = Topology::build(&sub, file)?;
+                initial_map(&sub, &sub_topo, InitMethod::Lscm).ok()
+            }
+        };
+        kept.0.insert((faces.clone(), global.clone()), uv.clone());
+        let Some(uv) = uv else {
             continue;
         };
         let frames = mesh::frames::compute(&sub);
@@ -424,5 +449,19 @@ fn most_shrunk_vertex(
             }
         }
     }
+    // Only the current charts' maps are worth keeping.
+    *lscm = kept;
     Ok(worst)
+}
+
+/// LSCM maps of charts (`None`: LSCM failed), by chart: its faces and the cut mesh's vertex
+/// of each of its vertices, which together fix the chart's mesh (a seam inside a chart keeps
+/// its faces but splits vertices). LSCM is deterministic, so a kept map is the map.
+#[derive(Default)]
+struct LscmCache(std::collections::HashMap<(Vec<u32>, Vec<u32>), Option<Vec<[f64; 2]>>>);
+
+impl LscmCache {
+    fn take(&mut self, faces: &[u32], global: &[u32]) -> Option<Option<Vec<[f64; 2]>>> {
+        self.0.remove(&(faces.to_vec(), global.to_vec()))
+    }
 }

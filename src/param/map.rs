@@ -235,9 +235,28 @@ pub fn compute_map(
     progress: &mut dyn FnMut(Progress<'_>),
 ) -> Result<MapOutput> {
     let t1 = Instant::now();
+    let uv = initial_map(mesh, topo, init)?;
+    compute_map_from(
+        mesh, topo, uv, t1, solver, bijective, opts, device, progress,
+    )
+}
+
+/// [`compute_map`] from a start map already computed (started at `t1`, for the report's
+/// start-map time): the atlas has its charts' LSCM maps from choosing their seams.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn compute_map_from(
+    mesh: &TriMesh,
+    topo: &Topology,
+    mut uv: Vec<[f64; 2]>,
+    t1: Instant,
+    solver: SolverChoice,
+    bijective: bool,
+    opts: &AdmmOptions,
+    device: Option<&OnDevice<'_>>,
+    progress: &mut dyn FnMut(Progress<'_>),
+) -> Result<MapOutput> {
     let frames = mesh::frames::compute(mesh);
     let area_3d: f64 = frames.area.iter().sum();
-    let mut uv = initial_map(mesh, topo, init)?;
     normalize_area(mesh, &mut uv, area_3d);
     let init_flips = crate::init::count_flips(&mesh.faces, &uv);
     let seconds_init = t1.elapsed().as_secs_f64();
