@@ -458,10 +458,14 @@ fn most_shrunk_vertex(
 /// of each of its vertices, which together fix the chart's mesh (a seam inside a chart keeps
 /// its faces but splits vertices). LSCM is deterministic, so a kept map is the map.
 #[derive(Default)]
-struct LscmCache(std::collections::HashMap<(Vec<u32>, Vec<u32>), Option<Vec<[f64; 2]>>>);
+struct LscmCache(std::collections::HashMap<ChartKey, Option<Uv>>);
+
+/// A chart's faces and the cut mesh's vertex of each of its vertices.
+type ChartKey = (Vec<u32>, Vec<u32>);
+type Uv = Vec<[f64; 2]>;
 
 impl LscmCache {
-    fn take(&mut self, faces: &[u32], global: &[u32]) -> Option<Option<Vec<[f64; 2]>>> {
+    fn take(&mut self, faces: &[u32], global: &[u32]) -> Option<Option<Uv>> {
         self.0.remove(&(faces.to_vec(), global.to_vec()))
     }
 }
