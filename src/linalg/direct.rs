@@ -25,7 +25,7 @@
 //! result, like the rest of the CPU path, does not depend on the thread count.
 #![forbid(unsafe_code)]
 
-use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltError;
 use faer::perm::PermRef;
 use faer::sparse::linalg::amd;
@@ -91,6 +91,8 @@ pub struct CholeskySymbolic {
     symbolic: Arc<SymbolicCholesky<usize>>,
     /// The permuted matrix `P A Pᵀ`'s one triangle, the one the numeric factorisation reads.
     permuted: Arc<Permuted>,
+    /// Workspace of one numeric factorisation (it depends on the symbolic factor only).
+    scratch: StackReq,
 }
 
 /// Where each stored entry of `A` goes in the triangle of `P A Pᵀ` that faer's numeric
@@ -111,7 +113,8 @@ struct Permuted {
 impl Permuted {
     /// The structure of `P A Pᵀ`'s `lower` (or upper) triangle for the symmetric CSR pattern
     /// (`indptr`, `indices`), whose upper triangle per row is read, and the inverse
-    /// permutation `inv` (old index → new; `None`: identity). Rows within a column ascend.
+    /// permutation `inv` (old index → new; `None`: identity). Rows within a column are in no
+    /// particular order, as faer's own permuted matrix (its numeric factorisation scatters them).
     fn new(indptr: &[usize], indices: &[usize], inv: Option<&[usize]>, lower: bool) -> Permuted {
         let n = indptr.len() - 1;
         let new = |i: usize| inv.map_or(i, |p| p[i]);
@@ -138,7 +141,7 @@ impl Permuted {
         let nnz = col_ptr[n];
         let mut next = col_ptr.clone();
         let mut row_idx = vec![0usize; nnz];
-        let mut source = vec![0usize; nnz];
+        let mut scatter = vec![usize::MAX; indices.len()];
         for r in 0..n {
             for (k, &c) in indices
                 .iter()
@@ -148,28 +151,10 @@ impl Permuted {
             {
                 if let Some((col, row)) = place(r, c) {
                     row_idx[next[col]] = row;
-                    source[next[col]] = k;
+                    scatter[k] = next[col];
                     next[col] += 1;
                 }
             }
-        }
-        // Ascending rows per column (faer's checked constructor wants them sorted).
-        for j in 0..n {
-            let range = col_ptr[j]..col_ptr[j + 1];
-            let mut pairs: Vec<(usize, usize)> = row_idx[range.clone()]
-                .iter()
-                .copied()
-                .zip(source[range.clone()].iter().copied())
-                .collect();
-            pairs.sort_unstable();
-            for (t, (row, k)) in range.zip(pairs) {
-                row_idx[t] = row;
-                source[t] = k;
-            }
-        }
-        let mut scatter = vec![usize::MAX; indices.len()];
-        for (t, &k) in source.iter().enumerate() {
-            scatter[k] = t;
         }
         Permuted {
             col_ptr,
@@ -294,12 +279,25 @@ impl CholeskySymbolic {
             symbolic.perm().map(|p| p.arrays().1),
             lower,
         );
+        let scratch = match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                supernodal::factorize_supernodal_numeric_llt_scratch::<usize, f64>(
+                    s,
+                    Par::Seq,
+                    Default::default(),
+                )
+            }
+            SymbolicCholeskyRaw::Simplicial(_) => {
+                simplicial::factorize_simplicial_numeric_llt_scratch::<usize, f64>(n)
+            }
+        };
         Ok(CholeskySymbolic {
             n,
             indptr: indptr.to_vec(),
             indices: indices.to_vec(),
             symbolic: Arc::new(symbolic),
             permuted: Arc::new(permuted),
+            scratch,
         })
     }
 
@@ -324,15 +322,13 @@ impl CholeskySymbolic {
                 permuted_values[t] = v;
             }
         }
-        let pattern =
-            SymbolicSparseColMatRef::new_checked(self.n, self.n, &p.col_ptr, None, &p.row_idx);
+        let pattern = SymbolicSparseColMatRef::new_unsorted_checked(
+            self.n, self.n, &p.col_ptr, None, &p.row_idx,
+        );
         let mat = SparseColMatRef::new(pattern, &permuted_values);
         let mut values = vec![0.0; self.symbolic.len_val()];
-        let scratch = self
-            .symbolic
-            .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
-        let mut mem =
-            MemBuffer::try_new(scratch).map_err(|e| faer_error("factorisation workspace", e))?;
+        let mut mem = MemBuffer::try_new(self.scratch)
+            .map_err(|e| faer_error("factorisation workspace", e))?;
         let stack = MemStack::new(&mut mem);
         match self.symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(s) => supernodal::factorize_supernodal_numeric_llt(
