@@ -11,7 +11,7 @@ use crate::mesh::{self, Topology, TriMesh};
 use crate::metrics;
 use crate::param::job::{ParamJob, ParamOutput};
 use crate::param::map::{
-    compute_map, compute_map_from, MapOutput, OnDevice, Progress, SolverChoice, SolverPath,
+    compute_map_from, MapOutput, OnDevice, Progress, SolverChoice, SolverPath,
 };
 use crate::param::AdmmOptions;
 use crate::report::ParamReport;
@@ -73,29 +73,26 @@ pub(crate) fn run_atlas(
         for (c, faces) in cutm.charts.iter().enumerate() {
             let (sub, global) = cutm.chart_mesh(faces);
             let sub_topo = Topology::build(&sub, &job.input)?;
-            let map = match (cache.remove(faces), lscm.take(faces, &global)) {
-                (Some(m), _) => m,
-                (None, Some(Some(uv))) if job.init == InitMethod::Lscm => compute_map_from(
-                    &sub,
-                    &sub_topo,
-                    uv,
-                    Instant::now(),
-                    solver,
-                    job.bijective,
-                    admm,
-                    device.as_ref(),
-                    progress,
-                )?,
-                (None, _) => compute_map(
-                    &sub,
-                    &sub_topo,
-                    job.init,
-                    solver,
-                    job.bijective,
-                    admm,
-                    device.as_ref(),
-                    progress,
-                )?,
+            let map = match cache.remove(faces) {
+                Some(m) => m,
+                None => {
+                    let t1 = Instant::now();
+                    let uv = match lscm.take(faces, &global) {
+                        Some(Some(uv)) if job.init == InitMethod::Lscm => uv,
+                        _ => initial_map(&sub, &sub_topo, job.init)?,
+                    };
+                    compute_map_from(
+                        &sub,
+                        &sub_topo,
+                        uv,
+                        t1,
+                        solver,
+                        job.bijective,
+                        admm,
+                        device.as_ref(),
+                        progress,
+                    )?
+                }
             };
             if !metrics::boundary_intersecting_pairs(&map.uv, &sub_topo.boundary_loops).is_empty() {
                 overlapping.push(c);
