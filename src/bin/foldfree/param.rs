@@ -25,7 +25,8 @@ pub struct ParamArgs {
     /// each primitive; a set that exists, or would leave a gap, is refused).
     #[arg(long, value_name = "N")]
     uv_set: Option<u32>,
-    /// Start map. Default: lscm with the ADMM solver, tutte otherwise.
+    /// Start map. Default: tutte with --solver global, lscm otherwise (also for the charts of
+    /// an atlas, which the global solver maps unless --solver is given).
     #[arg(long, value_enum)]
     init: Option<InitMethod>,
     /// Solver. Default: admm for a disk (with the hand-off to the global solver when it
