@@ -1,6 +1,6 @@
 //! The cutting path of `foldfree param`: meshes that are not one disk (closed, any genus,
-//! several holes or components) are cut into disk charts, each chart is mapped by
-//! [`compute_map`], and the charts are packed into the unit square.
+//! several holes or components) are cut into disk charts, each chart is mapped as a disk
+//! ([`crate::param::map::compute_map`]), and the charts are packed into the unit square.
 #![forbid(unsafe_code)]
 
 use std::path::Path;
