@@ -165,6 +165,12 @@ impl Topology {
         &self.vv_edges[self.vv_offsets[v] as usize..self.vv_offsets[v + 1] as usize]
     }
 
+    /// The edge between `a` and `b`, if they are neighbours (a search in `a`'s sorted list).
+    pub fn edge_between(&self, a: u32, b: u32) -> Option<u32> {
+        let i = self.neighbors(a).binary_search(&b).ok()?;
+        Some(self.neighbor_edges(a)[i])
+    }
+
     /// Number of fans the faces around `v` form (faces joined through shared edges at `v`):
     /// 0 for an unreferenced vertex, 1 for a manifold one.
     pub fn fan_count(&self, v: u32) -> usize {

@@ -406,22 +406,22 @@ fn most_shrunk_vertex(
             continue;
         }
         let (sub, global) = cutm.chart_mesh(faces);
-        let uv = match lscm.take(faces, &global) {
+        let key = (faces.clone(), global.clone());
+        let uv = match lscm.0.remove(&key) {
             Some(uv) => uv,
             None => {
                 let sub_topo = Topology::build(&sub, file)?;
                 initial_map(&sub, &sub_topo, InitMethod::Lscm).ok()
             }
         };
-        kept.0.insert((faces.clone(), global.clone()), uv.clone());
-        let Some(uv) = uv else {
+        let Some(uv) = kept.0.entry(key).or_insert(uv).as_ref() else {
             continue;
         };
         let frames = mesh::frames::compute(&sub);
         let area_uv: Vec<f64> = sub
             .faces
             .iter()
-            .map(|f| crate::init::face_area_2d(&uv, f))
+            .map(|f| crate::init::face_area_2d(uv, f))
             .collect();
         let (t3, tuv): (f64, f64) = (frames.area.iter().sum(), area_uv.iter().sum());
         if !(t3 > 0.0 && tuv > 0.0) {

@@ -404,12 +404,6 @@ impl Ord for Item {
     }
 }
 
-/// Edge index of (a, b) via the CSR neighbour list (edges are sorted, so binary search).
-fn edge_index(topo: &Topology, a: u32, b: u32) -> Option<u32> {
-    let key = if a < b { [a, b] } else { [b, a] };
-    topo.edges.binary_search(&key).ok().map(|e| e as u32)
-}
-
 /// Multi-source Dijkstra. Returns (distance, parent edge, source region) per vertex.
 fn dijkstra(
     topo: &Topology,
@@ -484,7 +478,7 @@ fn primal_tree(mesh: &TriMesh, topo: &Topology, weights: &[f64]) -> PrimalTree {
             // Each loop minus its closing edge goes into the tree: its cap is then a leaf of
             // the dual tree, so removing the caps cannot split the chart.
             if i + 1 < lp.len() {
-                if let Some(e) = edge_index(topo, v, lp[i + 1]) {
+                if let Some(e) = topo.edge_between(v, lp[i + 1]) {
                     in_tree[e as usize] = true;
                 }
             }
@@ -606,11 +600,11 @@ fn prune(topo: &Topology, cut: &mut [bool]) {
         let Some(&w) = topo
             .neighbors(v)
             .iter()
-            .find(|&&w| edge_index(topo, v, w).is_some_and(|e| cut[e as usize]))
+            .find(|&&w| topo.edge_between(v, w).is_some_and(|e| cut[e as usize]))
         else {
             continue;
         };
-        let Some(e) = edge_index(topo, v, w) else {
+        let Some(e) = topo.edge_between(v, w) else {
             continue;
         };
         cut[e as usize] = false;
@@ -658,11 +652,11 @@ fn cut_closed_spheres(mesh: &TriMesh, topo: &Topology, weights: &[f64], cut: &mu
             // Route a single-edge path through a common neighbour of its ends.
             let [x, y] = topo.edges[path[0] as usize];
             if let Some(&m) = topo.neighbors(x).iter().find(|&&m| {
-                m != y && edge_index(topo, m, y).is_some() && edge_index(topo, m, x).is_some()
+                m != y && topo.edge_between(m, y).is_some() && topo.edge_between(m, x).is_some()
             }) {
                 path.clear();
-                path.extend(edge_index(topo, x, m));
-                path.extend(edge_index(topo, m, y));
+                path.extend(topo.edge_between(x, m));
+                path.extend(topo.edge_between(m, y));
             }
         }
         for e in path {

@@ -48,6 +48,8 @@ fn check_invariants(mesh: &TriMesh, t: &Topology) {
                 [v.min(u), v.max(u)],
                 "edge to each neighbour"
             );
+            assert_eq!(t.edge_between(v, u), Some(e));
+            assert_eq!(t.edge_between(u, v), Some(e));
         }
         for &u in nb {
             let key = [v.min(u), v.max(u)];
