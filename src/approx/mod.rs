@@ -265,6 +265,11 @@ pub struct ApproxReport {
     pub polygons: usize,
     pub polygon_holes: usize,
     pub corners: usize,
+    /// V − E + F of the input and of the polygon mesh: equal unless a region holds a handle
+    /// of the input, which its planar polygon closes (each closed handle adds 2; a note says
+    /// so).
+    pub euler_input: i64,
+    pub euler_polygons: i64,
     pub seconds: StageTimes,
     /// Plain-language notes on anything that did not meet the targets.
     pub notes: Vec<String>,
@@ -893,6 +898,19 @@ fn realise(
             r.defects.len()
         ));
     }
+    let topo = surface.topo;
+    let euler_input = topo.n_vertices as i64 - topo.edges.len() as i64 + mesh.faces.len() as i64;
+    let euler_polygons = r.polygons.euler_characteristic();
+    if euler_polygons != euler_input {
+        notes.push(format!(
+            "the polygon mesh's Euler characteristic is {euler_polygons}, the input's \
+             {euler_input}: regions holding a handle of the input close it ({} fewer)",
+            match (euler_polygons - euler_input) / 2 {
+                1 => "1 handle".to_string(),
+                h => format!("{h} handles"),
+            }
+        ));
+    }
     let rel = |x: f64| x / diag;
     let f = &part.facts;
     let report = ApproxReport {
@@ -927,6 +945,8 @@ fn realise(
         polygons: r.polygons.polygons.len(),
         polygon_holes: r.polygons.holes,
         corners: r.polygons.positions.len(),
+        euler_input,
+        euler_polygons,
         seconds: times,
         notes,
         options: opts.clone(),

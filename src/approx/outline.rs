@@ -737,6 +737,27 @@ impl Fits {
         Fits { region, fit }
     }
 
+    /// `self` after the faces of region `r` that `labels` gives the label `n` (= the region
+    /// count) became region `n`: only the two regions' moments are summed again (in face
+    /// order, as [`Fits::new`] sums them: the same values).
+    fn with_split(&self, face: &[Moments], labels: &[u32], r: u32, n: usize) -> Fits {
+        let (mut kept, mut moved) = (Moments::default(), Moments::default());
+        for (f, &l) in labels.iter().enumerate() {
+            if l == r {
+                kept = kept.add(&face[f]);
+            } else if l as usize == n {
+                moved = moved.add(&face[f]);
+            }
+        }
+        let mut region = self.region.clone();
+        let mut fit = self.fit.clone();
+        region[r as usize] = kept;
+        fit[r as usize] = fit_or_flat(&kept);
+        region.push(moved);
+        fit.push(fit_or_flat(&moved));
+        Fits { region, fit }
+    }
+
     fn planes(&self) -> Vec<Plane> {
         self.fit.iter().map(|f| f.0).collect()
     }
@@ -1313,30 +1334,36 @@ fn spend_budget(
 ) -> Option<Built> {
     let face_moments = &s.moments[..];
     let mut last = None;
+    let mut fits = Fits::new(face_moments, labels, *n);
     while *n < k {
-        let fits = Fits::new(face_moments, labels, *n);
         let Some(worst) = (0..*n)
             .filter(|&r| !unsplittable[r] && fits.fit[r].1 > 0.0)
             .max_by(|&a, &b| fits.fit[a].1.total_cmp(&fits.fit[b].1))
         else {
             break;
         };
+        let was = fits.fit[worst].1;
         let mut trial = labels.clone();
         let halved = s.split(&mut trial, worst as u32, *n);
-        let after = Fits::new(face_moments, &trial, *n + 1);
-        let (kept, was) = (after.fit[worst].1 + after.fit[*n].1, fits.fit[worst].1);
-        if !halved || kept > keep * was || kept >= was {
-            unsplittable[worst] = true;
-            continue;
-        }
-        match build(s, &trial, &after.planes()) {
-            Ok(b) => {
+        let tried = halved.then(|| {
+            let after = fits.with_split(face_moments, &trial, worst as u32, *n);
+            let kept = after.fit[worst].1 + after.fit[*n].1;
+            if kept > keep * was || kept >= was {
+                return None;
+            }
+            build(s, &trial, &after.planes())
+                .ok()
+                .map(|b| (trial, b, after))
+        });
+        match tried.flatten() {
+            Some((trial, b, after)) => {
                 *labels = trial;
                 *n += 1;
+                fits = after;
                 unsplittable.push(false);
                 last = Some(b);
             }
-            Err(_) => unsplittable[worst] = true,
+            None => unsplittable[worst] = true,
         }
     }
     last
@@ -1405,7 +1432,7 @@ fn resplit(
         if region_parts(s.topo, &trial, r).len() != 1 {
             continue;
         }
-        let planes = Fits::new(face_moments, &trial, n + 1).planes();
+        let planes = fits.with_split(face_moments, &trial, r, n).planes();
         if let Ok(built) = build(s, &trial, &planes) {
             labels.copy_from_slice(&trial);
             return Some(built);
@@ -1441,6 +1468,33 @@ mod tests {
         let (m, t, sides) = crate::approx::testing::cube(3);
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
         test(&Surface::new(&t, &m, &normals, &areas), &sides);
+    }
+
+    /// The Euler characteristic of a polygon mesh, counted on its bridged polygons, is the
+    /// surface's: the cube's six squares give 2 (a sphere); a square with a square hole, one
+    /// polygon with the hole bridged in, gives 0 (an annulus: 8 corners, 8 edges, one face with
+    /// one hole).
+    #[test]
+    fn euler_characteristic_counts_a_bridged_hole_as_a_hole() {
+        on_cube(|s, sides| {
+            let (poly, _, _) = build(s, sides, &fit_planes(s, sides, 6)).unwrap();
+            assert_eq!(poly.euler_characteristic(), 2);
+        });
+        let square = |r: f64| [[-r, -r], [r, -r], [r, r], [-r, r]];
+        let pts: Vec<[f64; 2]> = square(2.0)
+            .into_iter()
+            .chain(square(1.0).into_iter().rev())
+            .collect();
+        let bridged = bridge_holes(&[0, 1, 2, 3], vec![vec![4, 5, 6, 7]], &|c| pts[c as usize]);
+        assert_eq!(bridged.len(), 10);
+        let mesh = PolygonMesh {
+            positions: pts.iter().map(|p| [p[0], p[1], 0.0]).collect(),
+            polygons: vec![bridged],
+            region: vec![0],
+            holes: 1,
+            corners: vec![0; 8],
+        };
+        assert_eq!(mesh.euler_characteristic(), 0);
     }
 
     /// The cube's six sides given, two of them merged in the partition realised: the lost

@@ -24,6 +24,31 @@ pub struct PolygonMesh {
     pub holes: usize,
 }
 
+impl PolygonMesh {
+    /// V − E + F of the polygon mesh's surface (corners on a polygon, edges between them, a
+    /// polygon with h holes counting 1 − h): with the holes bridged in, each bridge is one
+    /// more edge and each bridged polygon one disk, so the count over the bridged polygons is
+    /// the same. Compared with the input's, it says whether a region closed a handle of it
+    /// (a region is flattened into a planar polygon, which has no handle).
+    pub fn euler_characteristic(&self) -> i64 {
+        let mut edges: Vec<(u32, u32)> = Vec::new();
+        for p in &self.polygons {
+            for (i, &a) in p.iter().enumerate() {
+                let b = p[(i + 1) % p.len()];
+                if a != b {
+                    edges.push((a.min(b), a.max(b)));
+                }
+            }
+        }
+        edges.sort_unstable();
+        edges.dedup();
+        let mut used: Vec<u32> = self.polygons.iter().flatten().copied().collect();
+        used.sort_unstable();
+        used.dedup();
+        used.len() as i64 - edges.len() as i64 + self.polygons.len() as i64
+    }
+}
+
 /// An orthonormal frame of the plane with unit normal `n`.
 pub(super) fn basis(n: V3) -> (V3, V3) {
     let h = if n[0].abs() < 0.9 {
