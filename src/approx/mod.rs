@@ -898,8 +898,7 @@ fn realise(
             r.defects.len()
         ));
     }
-    let topo = surface.topo;
-    let euler_input = topo.n_vertices as i64 - topo.edges.len() as i64 + mesh.faces.len() as i64;
+    let euler_input = surface.topo.euler_characteristic;
     let euler_polygons = r.polygons.euler_characteristic();
     if euler_polygons != euler_input {
         notes.push(format!(

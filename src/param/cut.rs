@@ -597,14 +597,12 @@ fn prune(topo: &Topology, cut: &mut [bool]) {
         if degree[v as usize] != 1 {
             continue;
         }
-        let Some(&w) = topo
+        let Some((&w, &e)) = topo
             .neighbors(v)
             .iter()
-            .find(|&&w| topo.edge_between(v, w).is_some_and(|e| cut[e as usize]))
+            .zip(topo.neighbor_edges(v))
+            .find(|&(_, &e)| cut[e as usize])
         else {
-            continue;
-        };
-        let Some(e) = topo.edge_between(v, w) else {
             continue;
         };
         cut[e as usize] = false;
