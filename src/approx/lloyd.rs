@@ -1,5 +1,5 @@
-//! Lloyd relaxation of a face partition under the L2,1 (normal) metric, as in Variational
-//! Shape Approximation (Cohen-Steiner, Alliez & Desbrun 2004).
+//! Lloyd relaxation of a face partition under the L2,1 (normal) metric, or the L2 (distance to
+//! the plane) one, as in Variational Shape Approximation (Cohen-Steiner, Alliez & Desbrun 2004).
 //!
 //! Why: region growing with a threshold leaves jagged, elongated regions whose shared
 //! boundaries run in arbitrary directions. Once each region is made planar, a boundary shared
@@ -14,11 +14,17 @@
 //! of least error area·|n_f − N_c|²; regions are then re-grown from the seeds by one global
 //! priority flood (least error first). Flooding keeps every region connected and non-empty and
 //! never changes the region count.
+//!
+//! The round is written once over a [`Metric`]: VSA's L2,1 ([`Normals`]) for the clustering
+//! and the realisation's splits, and its L2 ([`Planes`], each face to the region whose
+//! least-squares plane is nearest) for the two-plane split of a region whose normal split
+//! cannot be realised ([`split_region_planes`]).
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-use super::geom::{add, normalize, scale, sub, V3};
+use super::geom::{add, normalize, scale, sub, Plane, V3};
+use super::outline::Moments;
 use crate::mesh::{Topology, NO_FACE};
 
 /// Edge-neighbour faces of `f`.
@@ -30,10 +36,85 @@ pub(super) fn neighbors(topo: &Topology, f: usize) -> impl Iterator<Item = usize
     })
 }
 
-/// L2,1 error of face `f` against proxy normal `p`.
-fn err(normals: &[V3], areas: &[f64], f: usize, p: V3) -> f64 {
-    let d = sub(normals[f], p);
-    areas[f] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+/// What a Lloyd round fits to each region (its proxy) and how far a face is from a proxy.
+pub trait Metric {
+    type Proxy: Clone;
+    /// The proxies of regions `0..count` fitted to the faces `members` (each with its label).
+    fn proxies(&self, labels: &[u32], members: &[usize], count: usize) -> Vec<Self::Proxy>;
+    /// The error of face `f` against proxy `p` (non-negative).
+    fn err(&self, f: usize, p: &Self::Proxy) -> f64;
+    /// The point of face `f` a region is halved by ([`halve`]: across the main direction of
+    /// their spread) and its weight.
+    fn key(&self, f: usize) -> V3;
+    fn weight(&self, f: usize) -> f64;
+    /// Whether a region whose weighted keys sum to `sum` can be halved.
+    fn halvable(&self, _sum: V3) -> bool {
+        true
+    }
+}
+
+/// VSA's L2,1 metric: the proxy is the region's area-weighted mean normal, a face's error
+/// its area times the squared difference of its normal from it.
+pub struct Normals<'a> {
+    pub normals: &'a [V3],
+    pub areas: &'a [f64],
+}
+
+impl Metric for Normals<'_> {
+    type Proxy = V3;
+    fn proxies(&self, labels: &[u32], members: &[usize], count: usize) -> Vec<V3> {
+        let mut sums = vec![[0.0; 3]; count];
+        for &f in members {
+            let c = labels[f] as usize;
+            sums[c] = add(sums[c], scale(self.normals[f], self.areas[f]));
+        }
+        sums.iter()
+            .map(|&s| normalize(s).unwrap_or([0.0; 3]))
+            .collect()
+    }
+    fn err(&self, f: usize, p: &V3) -> f64 {
+        let d = sub(self.normals[f], *p);
+        self.areas[f] * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    }
+    fn key(&self, f: usize) -> V3 {
+        self.normals[f]
+    }
+    fn weight(&self, f: usize) -> f64 {
+        self.areas[f]
+    }
+    /// Normals that cancel have no mean direction to spread about.
+    fn halvable(&self, sum: V3) -> bool {
+        normalize(sum).is_some()
+    }
+}
+
+/// VSA's L2 metric: the proxy is the region's least-squares plane, a face's error the
+/// integral of the squared distance of its points to it. The one the polygons are built on:
+/// a boundary where two regions' planes are equally near a face lies along the line where
+/// the planes meet, and a junction where three are lies near their common point.
+pub struct Planes<'a> {
+    pub moments: &'a [Moments],
+}
+
+impl Metric for Planes<'_> {
+    type Proxy = Option<Plane>;
+    fn proxies(&self, labels: &[u32], members: &[usize], count: usize) -> Vec<Option<Plane>> {
+        let mut sums = vec![Moments::default(); count];
+        for &f in members {
+            let c = labels[f] as usize;
+            sums[c] = sums[c].add(&self.moments[f]);
+        }
+        sums.iter().map(|m| m.fit().map(|(p, _)| p)).collect()
+    }
+    fn err(&self, f: usize, p: &Option<Plane>) -> f64 {
+        p.map_or(f64::INFINITY, |p| self.moments[f].sq_distance(&p).max(0.0))
+    }
+    fn key(&self, f: usize) -> V3 {
+        self.moments[f].centroid()
+    }
+    fn weight(&self, f: usize) -> f64 {
+        self.moments[f].area()
+    }
 }
 
 /// Relaxes `labels` (regions 0..count, each connected) for at most `rounds` rounds, stopping
@@ -47,8 +128,7 @@ pub fn relax(
 ) -> usize {
     relax_subset(
         topo,
-        normals,
-        areas,
+        &Normals { normals, areas },
         labels,
         &vec![true; labels.len()],
         rounds,
@@ -59,10 +139,9 @@ pub fn relax(
 /// compete for them and the rest of the partition is left as it is. Each region's proxy is
 /// taken from its movable faces (all of them for [`relax`]; for a split, the two halves are
 /// all movable), so a round costs the movable faces, not the mesh.
-pub fn relax_subset(
+pub fn relax_subset<M: Metric>(
     topo: &Topology,
-    normals: &[V3],
-    areas: &[f64],
+    metric: &M,
     labels: &mut [u32],
     movable: &[bool],
     rounds: usize,
@@ -85,19 +164,11 @@ pub fn relax_subset(
     let mut back1 = snapshot(labels);
     let mut back2: Vec<u32> = Vec::new();
     for round in 0..rounds {
-        let mut sums = vec![[0.0; 3]; count];
-        for &f in &members {
-            let c = labels[f] as usize;
-            sums[c] = add(sums[c], scale(normals[f], areas[f]));
-        }
-        let proxy: Vec<V3> = sums
-            .iter()
-            .map(|&s| normalize(s).unwrap_or([0.0; 3]))
-            .collect();
+        let proxy = metric.proxies(labels, &members, count);
         let mut seed: Vec<Option<(f64, usize)>> = vec![None; count];
         for &f in &members {
             let c = labels[f];
-            let e = err(normals, areas, f, proxy[c as usize]);
+            let e = metric.err(f, &proxy[c as usize]);
             let s = &mut seed[c as usize];
             if s.is_none_or(|(be, _)| e < be) {
                 *s = Some((e, f));
@@ -120,7 +191,7 @@ pub fn relax_subset(
             if let Some(slot) = o.iter_mut().find(|x| **x == u32::MAX) {
                 *slot = c;
             }
-            let e = err(normals, areas, g, proxy[c as usize]);
+            let e = metric.err(g, &proxy[c as usize]);
             heap.push(Reverse((e.to_bits(), g, c)));
         };
         for (c, s) in seed.iter().enumerate() {
@@ -191,24 +262,60 @@ pub fn split_region(
     new_label: u32,
     rounds: usize,
 ) -> bool {
+    halve(
+        topo,
+        &Normals { normals, areas },
+        labels,
+        c,
+        new_label,
+        rounds,
+    )
+}
+
+/// Splits region `c` in two planes: halved across the longest extent of its faces'
+/// centroids, then the halves relaxed against each other under the L2 metric ([`Planes`]),
+/// i.e. each face goes to the half whose least-squares plane is nearer — a two-plane fit of
+/// the region. Where [`split_region`]'s halves cannot be realised, this cut lies where the
+/// two planes meet (the line their polygons share). Same contract as [`split_region`].
+pub fn split_region_planes(
+    topo: &Topology,
+    moments: &[Moments],
+    labels: &mut [u32],
+    c: u32,
+    new_label: u32,
+    rounds: usize,
+) -> bool {
+    halve(topo, &Planes { moments }, labels, c, new_label, rounds)
+}
+
+/// Region `c` halved across the main direction of the weighted spread of its faces'
+/// [`Metric::key`]s (about their weighted mean, so that faces lie on both sides along any
+/// direction — about the unit mean normal a region that turns far, a "C", has all its
+/// deviations on one side), then relaxed under `metric` with the rest of the partition held.
+fn halve<M: Metric>(
+    topo: &Topology,
+    metric: &M,
+    labels: &mut [u32],
+    c: u32,
+    new_label: u32,
+    rounds: usize,
+) -> bool {
     let members: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == c).collect();
+    let (key, area) = (|f| metric.key(f), |f| metric.weight(f));
     let sum = members
         .iter()
-        .fold([0.0; 3], |s, &f| add(s, scale(normals[f], areas[f])));
-    let total: f64 = members.iter().map(|&f| areas[f]).sum();
-    if total <= 0.0 || normalize(sum).is_none() {
+        .fold([0.0; 3], |s, &f| add(s, scale(key(f), area(f))));
+    let total: f64 = members.iter().map(|&f| area(f)).sum();
+    if total <= 0.0 || !metric.halvable(sum) {
         return false;
     }
-    // The centroid of the normals (not the unit mean normal): the area-weighted deviations
-    // from it sum to zero, so faces lie on both sides of it along any direction. About the
-    // unit mean, a region that turns far (a "C") has all its deviations on one side.
     let mean = scale(sum, 1.0 / total);
     let mut cov = [[0.0; 3]; 3];
     for &f in &members {
-        let d = sub(normals[f], mean);
+        let d = sub(key(f), mean);
         for i in 0..3 {
             for j in 0..3 {
-                cov[i][j] += areas[f] * d[i] * d[j];
+                cov[i][j] += area(f) * d[i] * d[j];
             }
         }
     }
@@ -225,7 +332,7 @@ pub fn split_region(
     let mut n_new = 0;
     for &f in &members {
         movable[f] = true;
-        let d = sub(normals[f], mean);
+        let d = sub(key(f), mean);
         if d[0] * dir[0] + d[1] * dir[1] + d[2] * dir[2] > 0.0 {
             labels[f] = new_label;
             n_new += 1;
@@ -237,7 +344,7 @@ pub fn split_region(
         }
         return false;
     }
-    relax_subset(topo, normals, areas, labels, &movable, rounds);
+    relax_subset(topo, metric, labels, &movable, rounds);
     let kept = members.iter().filter(|&&f| labels[f] == c).count();
     kept > 0 && kept < members.len()
 }
@@ -247,26 +354,11 @@ mod tests {
     use super::*;
     use crate::mesh::TriMesh;
 
-    /// A strip of 2·n triangles folded along x = n/2 into a roof: left half normal tilted one
-    /// way, right half the other. The relaxed partition must split exactly at the ridge.
-    /// A strip of 2n faces folded into a roof along its middle, with its topology (a manifold
-    /// strip by construction), face normals and areas.
+    /// A strip of 2n faces folded into a roof along its middle ([`crate::approx::testing::roof`]),
+    /// with its face normals and areas: the left half's normal tilted one way, the right
+    /// half's the other.
     fn roof(n: usize) -> (TriMesh, Topology, Vec<V3>, Vec<f64>) {
-        let mut positions = Vec::new();
-        for i in 0..=n {
-            let x = i as f64;
-            let z = if 2 * i <= n { x } else { n as f64 - x };
-            positions.push([x, 0.0, z]);
-            positions.push([x, 1.0, z]);
-        }
-        let mut faces = Vec::new();
-        for i in 0..n as u32 {
-            let (a, b, c, d) = (2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3);
-            faces.push([a, c, b]);
-            faces.push([b, c, d]);
-        }
-        let mesh = TriMesh { positions, faces };
-        let topo = Topology::build(&mesh, std::path::Path::new("roof")).unwrap();
+        let (mesh, topo) = crate::approx::testing::roof(n as u32, n as u32 / 2);
         let (nr, ar) = super::super::geom::face_normals_areas(&mesh.positions, &mesh.faces);
         (mesh, topo, nr, ar)
     }
@@ -340,6 +432,29 @@ mod tests {
             .iter()
             .zip(&ridge)
             .all(|(&l, &right)| (l == first_half) != right));
+    }
+
+    /// A roof whose ridge is a quarter of the way along (strips 0..3 rise, 3..12 fall): the
+    /// halving across the centroids' extent cuts in the middle, and the two planes' relaxation
+    /// moves the cut to the ridge, where each half lies on one plane exactly.
+    #[test]
+    fn two_plane_split_moves_the_cut_to_an_off_centre_ridge() {
+        let (n, r) = (12usize, 3usize);
+        let (mesh, topo) = crate::approx::testing::roof(n as u32, r as u32);
+        let moments: Vec<Moments> = mesh
+            .faces
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|v| mesh.positions[v as usize]);
+                Moments::triangle(a, b, c)
+            })
+            .collect();
+        let mut labels = vec![0u32; 2 * n];
+        assert!(split_region_planes(&topo, &moments, &mut labels, 0, 1, 10));
+        let rising = labels[0];
+        for (f, &l) in labels.iter().enumerate() {
+            assert_eq!(l == rising, f < 2 * r, "face {f}: {labels:?}");
+        }
     }
 
     #[test]

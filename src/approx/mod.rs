@@ -257,6 +257,10 @@ pub struct ApproxReport {
     /// [`outline::realise`]).
     pub regions_split: usize,
     pub merges: usize,
+    /// Of `regions_split`, halvings of a region into the two planes that fit it best, made on
+    /// the kept mesh where no region's normal halving could be realised and budget was left
+    /// (see [`outline::spend_on_two_planes`]).
+    pub plane_halvings: usize,
     /// Region merges at corners whose planes meet too far away, and of closed regions left
     /// with fewer than three neighbours by them.
     pub corner_merges: usize,
@@ -369,16 +373,16 @@ fn best_run(
     progress: &mut dyn FnMut(Stage),
 ) -> Result<ApproxOutput, ApproxError> {
     let t = Instant::now();
-    let bad = |o: &ApproxOutput| o.report.flipped_faces + o.report.degenerate_faces;
+    let bad = |o: &Run| o.report.flipped_faces + o.report.degenerate_faces;
     // A realisation that ends more than a quarter farther from the input than the partition
     // it was given has lost its planes to merges (a cascade); another seed's partition is an
     // independent draw of that.
-    let done = |o: &ApproxOutput| {
+    let done = |o: &Run| {
         bad(o) == 0 && o.report.mean_input_distance <= 1.25 * o.report.partition_mean_input_distance
     };
     // Fewest bad faces, then the smaller mean distance.
-    let key = |o: &ApproxOutput| (bad(o), o.report.mean_input_distance);
-    let mut best: Option<(ApproxOutput, Partitioned)> = None;
+    let key = |o: &Run| (bad(o), o.report.mean_input_distance);
+    let mut best: Option<(Run, Partitioned)> = None;
     let mut unrealised: Option<ApproxError> = None;
     let mut runs = 0;
     let smoothed = smooth(mesh, topo, opts, progress)?;
@@ -391,15 +395,14 @@ fn best_run(
     // Giving a region away stops the cascade of merges that a region whose outline crosses
     // itself starts, but it can start one of its own: `o`'s partition realised with merges
     // alone too, and the mesh nearer the input kept.
-    let nearer_with_merges_alone =
-        |o: ApproxOutput, part: &Partitioned, progress: &mut dyn FnMut(Stage)| {
-            let sub = with_seed(o.report.seed_used);
-            match realise(mesh, &surface, &sub, &smoothed, part, false, progress) {
-                Ok(m) if key(&m) < key(&o) => Ok(m),
-                Ok(_) | Err(ApproxError::Unrealisable(_)) => Ok(o),
-                Err(e) => Err(e),
-            }
-        };
+    let nearer_with_merges_alone = |o: Run, part: &Partitioned, progress: &mut dyn FnMut(Stage)| {
+        let sub = with_seed(o.report.seed_used);
+        match realise(mesh, &surface, &sub, &smoothed, part, false, progress) {
+            Ok(m) if key(&m) < key(&o) => Ok(m),
+            Ok(_) | Err(ApproxError::Unrealisable(_)) => Ok(o),
+            Err(e) => Err(e),
+        }
+    };
     // One seed: its partition, realised giving regions away, or with merges alone where
     // that realises nothing; with the realisations made. Where it gave a region away and
     // ended below K regions (merges the budget could not win back: a cascade), the merges-
@@ -475,7 +478,7 @@ fn best_run(
         };
         best = Some((b, part));
     }
-    let Some((mut best, _)) = best else {
+    let Some((mut best, part)) = best else {
         let why = match unrealised {
             Some(ApproxError::Unrealisable(m)) => m,
             _ => String::new(),
@@ -488,9 +491,24 @@ fn best_run(
             opts.k
         )));
     };
+    // Budget the kept mesh left unused (no region's normal halving could be realised) goes to
+    // two-plane halvings, then the planes are refitted and the borders relabelled again; kept
+    // if nearer. Made on the kept mesh only: on every draw it would cost each one the phase.
+    if best.report.k_obtained < opts.k {
+        let t = Instant::now();
+        let mut r = best.realised.clone();
+        if outline::spend_on_two_planes(&surface, &mut r, opts.k) > 0 {
+            let sub = with_seed(best.report.seed_used);
+            let before = best.report.seconds.polygons;
+            let halved = finish(mesh, &surface, &sub, &smoothed, &part, r, t, before);
+            if key(&halved) < key(&best) {
+                best = halved;
+            }
+        }
+    }
     best.report.runs = runs;
     best.report.seconds_all_runs = t.elapsed().as_secs_f64();
-    Ok(best)
+    Ok(best.into())
 }
 
 /// What the seed-independent stages give every run: the input's face normals and areas, the
@@ -827,9 +845,29 @@ fn input_distances(pos: &[V3], regions_at: &[Vec<u32>], planes: &[Plane]) -> (f6
     (sum / cnt.max(1) as f64, maxd)
 }
 
+/// A realised partition (stages 4–6) and its report.
+struct Run {
+    realised: outline::Realised,
+    report: ApproxReport,
+}
+
+impl From<Run> for ApproxOutput {
+    fn from(run: Run) -> ApproxOutput {
+        let r = run.realised;
+        ApproxOutput {
+            positions: r.polygons.positions.clone(),
+            faces: r.triangles,
+            face_cluster: r.labels,
+            planes: r.planes,
+            polygons: r.polygons,
+            report: run.report,
+        }
+    }
+}
+
 /// Stage 4, the partition realised by [`outline::realise`] (with `give_away` or merges
 /// alone): polygons whose corners are where the planes meet, the partition split or merged
-/// where they cannot realise it; the errors and the independent fold count of the result.
+/// where they cannot realise it; then stages 5–6 ([`finish`]).
 fn realise(
     mesh: &TriMesh,
     surface: &outline::Surface<'_>,
@@ -838,19 +876,35 @@ fn realise(
     part: &Partitioned,
     give_away: bool,
     progress: &mut dyn FnMut(Stage),
-) -> Result<ApproxOutput, ApproxError> {
-    let diag = geom::bbox_diagonal(mesh);
+) -> Result<Run, ApproxError> {
     progress(Stage::Polygons);
     let t = Instant::now();
     if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
         eprintln!(
             "approx: partition before realising: {} regions, mean distance {:.3e}·diag",
             part.n,
-            part.error / diag
+            part.error / geom::bbox_diagonal(mesh)
         );
     }
-    let mut r = outline::realise(surface, part.labels.clone(), part.n, opts.k, give_away)
+    let r = outline::realise(surface, part.labels.clone(), part.n, opts.k, give_away)
         .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
+    Ok(finish(mesh, surface, opts, smoothed, part, r, t, 0.0))
+}
+
+/// Stages 5–6 on a realised partition (`refit`, `relabel`), then the errors, the independent
+/// fold count and the report; the polygons stage's seconds are `earlier` + those since `t`.
+#[allow(clippy::too_many_arguments)]
+fn finish(
+    mesh: &TriMesh,
+    surface: &outline::Surface<'_>,
+    opts: &ApproxOptions,
+    smoothed: &Smoothed,
+    part: &Partitioned,
+    mut r: outline::Realised,
+    t: Instant,
+    earlier: f64,
+) -> Run {
+    let diag = geom::bbox_diagonal(mesh);
     let vc = cluster::vertex_clusters(surface.topo, &r.labels);
     refit(surface, &mesh.positions, &vc, &mut r, diag);
     if relabel::relabel(surface, &mesh.positions, &mut r, diag) {
@@ -862,7 +916,7 @@ fn realise(
         normals: smoothed.seconds_normals,
         vertices: smoothed.seconds_vertices,
         cluster: part.seconds,
-        polygons: t.elapsed().as_secs_f64(),
+        polygons: earlier + t.elapsed().as_secs_f64(),
         total: 0.0,
     };
     times.total = times.normals + times.vertices + times.cluster + times.polygons;
@@ -935,6 +989,7 @@ fn realise(
         degenerate_faces: degenerate,
         faces_reassigned: f.faces_reassigned,
         regions_dissolved: r.dissolved,
+        plane_halvings: r.plane_halvings,
         lloyd_rounds: f.lloyd_rounds,
         regions_split: r.splits,
         merges: r.merges,
@@ -950,14 +1005,10 @@ fn realise(
         notes,
         options: opts.clone(),
     };
-    Ok(ApproxOutput {
-        positions: r.polygons.positions.clone(),
-        faces: r.triangles,
-        face_cluster: r.labels,
-        planes: r.planes,
-        polygons: r.polygons,
+    Run {
+        realised: r,
         report,
-    })
+    }
 }
 
 /// What the partition stage did, for the report.
@@ -1052,6 +1103,27 @@ pub(crate) mod testing {
         }
         let m = TriMesh { positions, faces };
         let t = Topology::build(&m, Path::new("grid")).unwrap();
+        (m, t)
+    }
+
+    /// A strip of 2n faces (strip i over x ∈ [i, i + 1], y ∈ [0, 1], two faces each) folded
+    /// into a roof at x = `ridge`: rising at 45° before it, falling after; faces face up.
+    pub fn roof(n: u32, ridge: u32) -> (TriMesh, Topology) {
+        let mut positions = Vec::new();
+        for i in 0..=n {
+            let (x, r) = (f64::from(i), f64::from(ridge));
+            let z = if i <= ridge { x } else { 2.0 * r - x };
+            positions.push([x, 0.0, z]);
+            positions.push([x, 1.0, z]);
+        }
+        let faces = (0..n)
+            .flat_map(|i| {
+                let (a, b, c, d) = (2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3);
+                [[a, c, b], [b, c, d]]
+            })
+            .collect();
+        let m = TriMesh { positions, faces };
+        let t = Topology::build(&m, Path::new("roof")).unwrap();
         (m, t)
     }
 

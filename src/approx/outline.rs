@@ -67,6 +67,19 @@ impl Moments {
         }
     }
 
+    pub fn area(&self) -> f64 {
+        self.area
+    }
+
+    /// The area-weighted centroid (the origin for no area).
+    pub fn centroid(&self) -> V3 {
+        if self.area > 0.0 {
+            scale(self.first, 1.0 / self.area)
+        } else {
+            [0.0; 3]
+        }
+    }
+
     /// The moments of the faces of `self` that are not those of `o` (a subset of them).
     pub fn sub(&self, o: &Moments) -> Moments {
         let neg = Moments {
@@ -686,6 +699,7 @@ pub fn build(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Built,
 }
 
 /// A partition realised as a polygon mesh.
+#[derive(Clone)]
 pub struct Realised {
     pub polygons: PolygonMesh,
     /// The polygons' triangles (indices into `polygons.positions`), in their planes, and the
@@ -703,6 +717,8 @@ pub struct Realised {
     pub unpinched: usize,
     /// Regions given away to their neighbours (`dissolve`; counted in `merges` too).
     pub dissolved: usize,
+    /// Regions added by [`spend_on_two_planes`] (counted in `splits` too).
+    pub plane_halvings: usize,
 }
 
 /// Regions sharing an edge, as sorted pairs.
@@ -1279,7 +1295,7 @@ pub fn realise(
     // quarter of the region's residual), then the boundaries the merges removed, then wherever
     // it lowers the residual at all.
     let before = n;
-    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 0.25) {
+    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 0.25, split) {
         (polygons, triangles, triangle_region) = b;
     }
     // Then the boundaries of the given partition that the realisation merged away, where
@@ -1294,7 +1310,7 @@ pub fn realise(
     }
     // Regions left alone at a quarter are tried again at any gain.
     let mut unsplittable = vec![false; n];
-    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 1.0) {
+    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 1.0, split) {
         (polygons, triangles, triangle_region) = b;
     }
     splits += n - before;
@@ -1310,13 +1326,42 @@ pub fn realise(
         merges,
         unpinched,
         dissolved,
+        plane_halvings: 0,
     })
 }
 
+/// Spends the budget `r` left (fewer than `k` regions) on halvings of its regions into the
+/// two planes that fit each best ([`super::lloyd::split_region_planes`]: the cut lies where
+/// the two planes meet, so the edge their polygons share is where the faces were), worst fit
+/// first, each kept where the partition stays realisable; the number of regions added
+/// (`r.plane_halvings`, counted in `r.splits` too). `r`'s planes become its regions'
+/// least-squares planes where any was added.
+///
+/// Why a second halving: [`realise`] halves across the regions' normals (the cut where the
+/// normal turns, which curvature asks for); when none of those can be realised, budget left is
+/// error left on the table, and the two-plane halving of a region may be realisable where its
+/// normals' is not — its cut follows where its planes meet.
+pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize {
+    let mut n = r.planes.len();
+    let before = n;
+    let mut unsplittable = vec![false; n];
+    let halve = |labels: &mut [u32], c: u32, n: usize| {
+        super::lloyd::split_region_planes(s.topo, &s.moments, labels, c, n as u32, 10)
+    };
+    if let Some(b) = spend_budget(s, &mut r.labels, &mut n, k, &mut unsplittable, 1.0, halve) {
+        (r.polygons, r.triangles, r.triangle_region) = b;
+        r.planes = Fits::new(&s.moments, &r.labels, n).planes();
+    }
+    let added = n - before;
+    r.splits += added;
+    r.plane_halvings += added;
+    added
+}
+
 /// Spends the budget left (`n` of `k` regions used) on the worst-fitting region while its
-/// split keeps at most `keep` of its residual and the partition stays realisable; a region
-/// whose split fails either is not tried again (`unsplittable`). The polygon mesh of the last
-/// split kept.
+/// split by `halve` (labels, region, new label → halved?) keeps at most `keep` of its residual
+/// and the partition stays realisable; a region whose split fails either is not tried again
+/// (`unsplittable`). The polygon mesh of the last split kept.
 ///
 /// Why `keep`: a region curved in one direction, halved across it, keeps 1/16 of its
 /// residual (the sagitta of a half is a quarter); a flat noisy one keeps most of it (each
@@ -1331,6 +1376,7 @@ fn spend_budget(
     k: usize,
     unsplittable: &mut Vec<bool>,
     keep: f64,
+    halve: impl Fn(&mut [u32], u32, usize) -> bool,
 ) -> Option<Built> {
     let face_moments = &s.moments[..];
     let mut last = None;
@@ -1344,7 +1390,7 @@ fn spend_budget(
         };
         let was = fits.fit[worst].1;
         let mut trial = labels.clone();
-        let halved = s.split(&mut trial, worst as u32, *n);
+        let halved = halve(&mut trial, worst as u32, *n);
         let tried = halved.then(|| {
             let after = fits.with_split(face_moments, &trial, worst as u32, *n);
             let kept = after.fit[worst].1 + after.fit[*n].1;
@@ -1468,6 +1514,42 @@ mod tests {
         let (m, t, sides) = crate::approx::testing::cube(3);
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
         test(&Surface::new(&t, &m, &normals, &areas), &sides);
+    }
+
+    /// The cube with two sides that meet at an edge (x = 0 and y = 0) merged into one region,
+    /// realised at K = 5, then one more region allowed: the two-plane halving splits the bent
+    /// region at the cube's edge (its faces' centroids spread most across it), each half on
+    /// its side's plane; with every region exact, nothing is left to gain.
+    #[test]
+    fn two_plane_halving_splits_a_bent_region_at_its_edge() {
+        on_cube(|s, sides| {
+            let merged: Vec<u32> = sides
+                .iter()
+                .map(|&x| [0, 1, 0, 2, 3, 4][x as usize])
+                .collect();
+            let mut r = realise(s, merged, 5, 5, true).unwrap();
+            assert_eq!(r.planes.len(), 5);
+            assert_eq!(spend_on_two_planes(s, &mut r, 6), 1);
+            assert_eq!((r.planes.len(), r.plane_halvings, r.splits), (6, 1, 1));
+            assert_eq!(r.polygons.polygons.len(), 6);
+            // The regions are the sides: one label per side, six different ones.
+            let mut label_of = [u32::MAX; 6];
+            for (f, face) in s.faces.iter().enumerate() {
+                let l = &mut label_of[sides[f] as usize];
+                if *l == u32::MAX {
+                    *l = r.labels[f];
+                }
+                assert_eq!(*l, r.labels[f], "face {f}");
+                let plane = r.planes[r.labels[f] as usize];
+                for &v in face {
+                    let d = plane.signed_distance(s.pos[v as usize]);
+                    assert!(d.abs() < 1e-9, "face {f} vertex {v}: {d}");
+                }
+            }
+            label_of.sort_unstable();
+            assert!(label_of.windows(2).all(|w| w[0] < w[1]), "{label_of:?}");
+            assert_eq!(spend_on_two_planes(s, &mut r, 7), 0);
+        });
     }
 
     /// The Euler characteristic of a polygon mesh, counted on its bridged polygons, is the
