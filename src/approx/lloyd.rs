@@ -269,11 +269,12 @@ pub fn split_region(
         c,
         new_label,
         rounds,
+        0,
     )
 }
 
-/// Splits region `c` in two planes: halved across the longest extent of its faces'
-/// centroids, then the halves relaxed against each other under the L2 metric ([`Planes`]),
+/// Splits region `c` in two planes: halved across the extent of its faces' centroids along
+/// their `axis`-th direction of spread (0 = the longest, 1 = the next), then the halves relaxed against each other under the L2 metric ([`Planes`]),
 /// i.e. each face goes to the half whose least-squares plane is nearer — a two-plane fit of
 /// the region. Where [`split_region`]'s halves cannot be realised, this cut lies where the
 /// two planes meet (the line their polygons share). Same contract as [`split_region`].
@@ -284,14 +285,24 @@ pub fn split_region_planes(
     c: u32,
     new_label: u32,
     rounds: usize,
+    axis: usize,
 ) -> bool {
-    halve(topo, &Planes { moments }, labels, c, new_label, rounds)
+    halve(
+        topo,
+        &Planes { moments },
+        labels,
+        c,
+        new_label,
+        rounds,
+        axis,
+    )
 }
 
-/// Region `c` halved across the main direction of the weighted spread of its faces'
-/// [`Metric::key`]s (about their weighted mean, so that faces lie on both sides along any
-/// direction — about the unit mean normal a region that turns far, a "C", has all its
-/// deviations on one side), then relaxed under `metric` with the rest of the partition held.
+/// Region `c` halved across the `axis`-th direction (0 = the main one) of the weighted spread
+/// of its faces' [`Metric::key`]s (about their weighted mean, so that faces lie on both sides
+/// along any direction — about the unit mean normal a region that turns far, a "C", has all
+/// its deviations on one side), then relaxed under `metric` with the rest of the partition
+/// held. False where the region has no spread along that direction.
 fn halve<M: Metric>(
     topo: &Topology,
     metric: &M,
@@ -299,6 +310,7 @@ fn halve<M: Metric>(
     c: u32,
     new_label: u32,
     rounds: usize,
+    axis: usize,
 ) -> bool {
     let members: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == c).collect();
     let (key, area) = (|f| metric.key(f), |f| metric.weight(f));
@@ -321,7 +333,9 @@ fn halve<M: Metric>(
     }
     let (vals, vecs) = crate::linalg::small::sym_eigen::<3>(&cov);
     // Largest eigenvalue's vector (sym_eigen's order is not assumed).
-    let Some(k) = (0..3).max_by(|&a, &b| vals[a].total_cmp(&vals[b])) else {
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| vals[b].total_cmp(&vals[a]));
+    let Some(&k) = order.get(axis) else {
         return false;
     };
     if vals[k] <= 0.0 || !vals[k].is_finite() {
@@ -450,7 +464,15 @@ mod tests {
             })
             .collect();
         let mut labels = vec![0u32; 2 * n];
-        assert!(split_region_planes(&topo, &moments, &mut labels, 0, 1, 10));
+        assert!(split_region_planes(
+            &topo,
+            &moments,
+            &mut labels,
+            0,
+            1,
+            10,
+            0
+        ));
         let rising = labels[0];
         for (f, &l) in labels.iter().enumerate() {
             assert_eq!(l == rising, f < 2 * r, "face {f}: {labels:?}");

@@ -426,10 +426,11 @@ fn best_run(
     let tries = opts.tries.max(1);
     let last = opts.restarts.max(tries - 1);
     // The draws are independent (each only reads the smoothed surface): two at a time on two
-    // threads, taken in seed order, and a restart drawn beside the one that made it
-    // unnecessary is dropped — the mesh kept is the one the seeds give one after the other.
+    // threads, always two (not the machine's core count), so the draws made — and the mesh
+    // kept, the nearest of them all — do not depend on the machine. A restart drawn beside
+    // the one that made it unnecessary is kept too: it is made anyway.
     let mut i = 0;
-    'draws: while i <= last {
+    while i <= last {
         let wave = (last + 1 - i).min(2);
         let seeds: Vec<u64> = (i..i + wave)
             .map(|j| opts.seed.wrapping_add(j as u64))
@@ -450,9 +451,6 @@ fn best_run(
             })
         };
         for (out, made) in drawn {
-            if i >= tries && best.as_ref().is_some_and(|b| done(&b.0)) {
-                break 'draws;
-            }
             i += 1;
             runs += made;
             match out {
@@ -465,6 +463,9 @@ fn best_run(
                 Err(e @ ApproxError::Unrealisable(_)) => unrealised = Some(e),
                 Err(e) => return Err(e),
             }
+        }
+        if i >= tries && best.as_ref().is_some_and(|b| done(&b.0)) {
+            break;
         }
     }
     // The kept realisation, if it gave regions away with all K regions left, realised with

@@ -1173,6 +1173,7 @@ pub fn realise(
     let mut seen = HashSet::new();
     let mut unsplittable: Vec<bool> = vec![false; n];
     let split = |labels: &mut [u32], r: u32, n: usize| s.split(labels, r, n);
+    let halve_normals = |labels: &mut [u32], r: u32, n: usize, _axis: usize| s.split(labels, r, n);
     let (mut polygons, mut triangles, mut triangle_region) = loop {
         let fits = Fits::new(face_moments, &labels, n);
         let defect = match build(s, &labels, &fits.planes()) {
@@ -1295,7 +1296,16 @@ pub fn realise(
     // quarter of the region's residual), then the boundaries the merges removed, then wherever
     // it lowers the residual at all.
     let before = n;
-    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 0.25, split) {
+    if let Some(b) = spend_budget(
+        s,
+        &mut labels,
+        &mut n,
+        k,
+        &mut unsplittable,
+        0.25,
+        halve_normals,
+        1,
+    ) {
         (polygons, triangles, triangle_region) = b;
     }
     // Then the boundaries of the given partition that the realisation merged away, where
@@ -1310,7 +1320,16 @@ pub fn realise(
     }
     // Regions left alone at a quarter are tried again at any gain.
     let mut unsplittable = vec![false; n];
-    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 1.0, split) {
+    if let Some(b) = spend_budget(
+        s,
+        &mut labels,
+        &mut n,
+        k,
+        &mut unsplittable,
+        1.0,
+        halve_normals,
+        1,
+    ) {
         (polygons, triangles, triangle_region) = b;
     }
     splits += n - before;
@@ -1341,14 +1360,29 @@ pub fn realise(
 /// normal turns, which curvature asks for); when none of those can be realised, budget left is
 /// error left on the table, and the two-plane halving of a region may be realisable where its
 /// normals' is not — its cut follows where its planes meet.
+///
+/// Why two directions: a region's faces spread over a surface, along two main directions. A
+/// twisted region (its normal turning about the direction it is long in) halved across that
+/// direction gives two planes that meet along a line running across the cut, which their
+/// polygons cannot share; halved along it, they may. So a region whose halving across its
+/// main direction cannot be realised is halved across the second one too.
 pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize {
     let mut n = r.planes.len();
     let before = n;
     let mut unsplittable = vec![false; n];
-    let halve = |labels: &mut [u32], c: u32, n: usize| {
-        super::lloyd::split_region_planes(s.topo, &s.moments, labels, c, n as u32, 10)
+    let halve = |labels: &mut [u32], c: u32, n: usize, axis: usize| {
+        super::lloyd::split_region_planes(s.topo, &s.moments, labels, c, n as u32, 10, axis)
     };
-    if let Some(b) = spend_budget(s, &mut r.labels, &mut n, k, &mut unsplittable, 1.0, halve) {
+    if let Some(b) = spend_budget(
+        s,
+        &mut r.labels,
+        &mut n,
+        k,
+        &mut unsplittable,
+        1.0,
+        halve,
+        2,
+    ) {
         (r.polygons, r.triangles, r.triangle_region) = b;
         r.planes = Fits::new(&s.moments, &r.labels, n).planes();
     }
@@ -1359,9 +1393,10 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
 }
 
 /// Spends the budget left (`n` of `k` regions used) on the worst-fitting region while its
-/// split by `halve` (labels, region, new label → halved?) keeps at most `keep` of its residual
-/// and the partition stays realisable; a region whose split fails either is not tried again
-/// (`unsplittable`). The polygon mesh of the last split kept.
+/// split by `halve` (labels, region, new label, direction → halved?; directions `0..axes`
+/// tried in turn) keeps at most `keep` of its residual and the partition stays realisable; a
+/// region whose split fails either way is not tried again (`unsplittable`). The polygon mesh
+/// of the last split kept.
 ///
 /// Why `keep`: a region curved in one direction, halved across it, keeps 1/16 of its
 /// residual (the sagitta of a half is a quarter); a flat noisy one keeps most of it (each
@@ -1376,7 +1411,8 @@ fn spend_budget(
     k: usize,
     unsplittable: &mut Vec<bool>,
     keep: f64,
-    halve: impl Fn(&mut [u32], u32, usize) -> bool,
+    halve: impl Fn(&mut [u32], u32, usize, usize) -> bool,
+    axes: usize,
 ) -> Option<Built> {
     let face_moments = &s.moments[..];
     let mut last = None;
@@ -1389,9 +1425,11 @@ fn spend_budget(
             break;
         };
         let was = fits.fit[worst].1;
-        let mut trial = labels.clone();
-        let halved = halve(&mut trial, worst as u32, *n);
-        let tried = halved.then(|| {
+        let tried = (0..axes).find_map(|axis| {
+            let mut trial = labels.clone();
+            if !halve(&mut trial, worst as u32, *n, axis) {
+                return None;
+            }
             let after = fits.with_split(face_moments, &trial, worst as u32, *n);
             let kept = after.fit[worst].1 + after.fit[*n].1;
             if kept > keep * was || kept >= was {
@@ -1401,7 +1439,7 @@ fn spend_budget(
                 .ok()
                 .map(|b| (trial, b, after))
         });
-        match tried.flatten() {
+        match tried {
             Some((trial, b, after)) => {
                 *labels = trial;
                 *n += 1;
