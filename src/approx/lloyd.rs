@@ -18,7 +18,7 @@
 //! The round is written once over a [`Metric`]: VSA's L2,1 ([`Normals`]) for the clustering
 //! and the realisation's splits, and its L2 ([`Planes`], each face to the region whose
 //! least-squares plane is nearest) for the two-plane split of a region whose normal split
-//! cannot be realised ([`split_region_planes`]).
+//! cannot be realised ([`halve`]).
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -247,63 +247,20 @@ pub fn relax_subset<M: Metric>(
     changed_rounds
 }
 
-/// Splits region `c` in two along the main direction in which its normals spread: faces whose
-/// normal lies on the positive side of that direction (about the mean) get label `new_label`,
-/// then the two halves are relaxed against each other (the rest of the partition is left as
-/// it is). A region that folds when flattened usually turns too much in one direction (a
-/// half-cylinder); its two halves each turn half as much. Returns false when the region has
-/// no spread to split along (all normals equal) or a half ends empty.
-pub fn split_region(
-    topo: &Topology,
-    normals: &[V3],
-    areas: &[f64],
-    labels: &mut [u32],
-    c: u32,
-    new_label: u32,
-    rounds: usize,
-) -> bool {
-    halve(
-        topo,
-        &Normals { normals, areas },
-        labels,
-        c,
-        new_label,
-        rounds,
-        0,
-    )
-}
-
-/// Splits region `c` in two planes: halved across the extent of its faces' centroids along
-/// their `axis`-th direction of spread (0 = the longest, 1 = the next), then the halves relaxed against each other under the L2 metric ([`Planes`]),
-/// i.e. each face goes to the half whose least-squares plane is nearer — a two-plane fit of
-/// the region. Where [`split_region`]'s halves cannot be realised, this cut lies where the
-/// two planes meet (the line their polygons share). Same contract as [`split_region`].
-pub fn split_region_planes(
-    topo: &Topology,
-    moments: &[Moments],
-    labels: &mut [u32],
-    c: u32,
-    new_label: u32,
-    rounds: usize,
-    axis: usize,
-) -> bool {
-    halve(
-        topo,
-        &Planes { moments },
-        labels,
-        c,
-        new_label,
-        rounds,
-        axis,
-    )
-}
-
-/// Region `c` halved across the `axis`-th direction (0 = the main one) of the weighted spread
-/// of its faces' [`Metric::key`]s (about their weighted mean, so that faces lie on both sides
-/// along any direction — about the unit mean normal a region that turns far, a "C", has all
-/// its deviations on one side), then relaxed under `metric` with the rest of the partition
-/// held. False where the region has no spread along that direction.
-fn halve<M: Metric>(
+/// Splits region `c` in two: halved across the `axis`-th direction (0 = the main one, 1 = the
+/// next) of the weighted spread of its faces' [`Metric::key`]s — faces on the positive side
+/// (about the weighted mean) get label `new_label` — then the two halves relaxed against each
+/// other under `metric` (the rest of the partition is left as it is). False when the region
+/// has no spread along that direction or a half ends empty.
+///
+/// With [`Normals`] (the realisation's split): a region that folds when flattened usually
+/// turns too much in one direction (a half-cylinder), and its two halves each turn half as
+/// much. About the mean normal, not the unit one: a region that turns far (a "C") has all
+/// its deviations from the unit mean on one side. With [`Planes`] (keys the face centroids):
+/// each face ends in the half whose least-squares plane is nearer — a two-plane fit of the
+/// region, whose cut lies where the two planes meet (the line their polygons share), which
+/// may be realisable where the normals' cut is not.
+pub fn halve<M: Metric>(
     topo: &Topology,
     metric: &M,
     labels: &mut [u32],
@@ -439,7 +396,18 @@ mod tests {
         let n = 8;
         let (_, topo, normals, areas) = roof(n);
         let mut labels = vec![0u32; 2 * n];
-        assert!(split_region(&topo, &normals, &areas, &mut labels, 0, 1, 10));
+        assert!(halve(
+            &topo,
+            &Normals {
+                normals: &normals,
+                areas: &areas
+            },
+            &mut labels,
+            0,
+            1,
+            10,
+            0
+        ));
         let ridge: Vec<bool> = (0..2 * n).map(|f| f >= n).collect();
         let first_half = labels[0];
         assert!(labels
@@ -464,9 +432,9 @@ mod tests {
             })
             .collect();
         let mut labels = vec![0u32; 2 * n];
-        assert!(split_region_planes(
+        assert!(halve(
             &topo,
-            &moments,
+            &Planes { moments: &moments },
             &mut labels,
             0,
             1,
@@ -490,15 +458,11 @@ mod tests {
         // A flat strip is still a manifold strip.
         let topo = Topology::build(&mesh, std::path::Path::new("flat")).unwrap();
         let mut labels = vec![0u32; 2 * n];
-        assert!(!split_region(
-            &topo,
-            &normals,
-            &areas,
-            &mut labels,
-            0,
-            1,
-            10
-        ));
+        let metric = Normals {
+            normals: &normals,
+            areas: &areas,
+        };
+        assert!(!halve(&topo, &metric, &mut labels, 0, 1, 10, 0));
         assert!(labels.iter().all(|&l| l == 0));
     }
 }

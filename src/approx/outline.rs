@@ -1106,9 +1106,13 @@ impl<'a> Surface<'a> {
     }
 
     /// Splits region `r` of `labels` in two, the new half labelled `n` (Lloyd, 10 rounds;
-    /// [`super::lloyd::split_region`]). False when it cannot be halved.
+    /// [`super::lloyd::halve`] under [`super::lloyd::Normals`]). False when it cannot be halved.
     fn split(&self, labels: &mut [u32], r: u32, n: usize) -> bool {
-        super::lloyd::split_region(self.topo, self.normals, self.areas, labels, r, n as u32, 10)
+        let metric = super::lloyd::Normals {
+            normals: self.normals,
+            areas: self.areas,
+        };
+        super::lloyd::halve(self.topo, &metric, labels, r, n as u32, 10, 0)
     }
 
     /// The faces around `v` in counter-clockwise order and whether `v` is on the border
@@ -1350,7 +1354,7 @@ pub fn realise(
 }
 
 /// Spends the budget `r` left (fewer than `k` regions) on halvings of its regions into the
-/// two planes that fit each best ([`super::lloyd::split_region_planes`]: the cut lies where
+/// two planes that fit each best ([`super::lloyd::halve`] under [`super::lloyd::Planes`]: the cut lies where
 /// the two planes meet, so the edge their polygons share is where the faces were), worst fit
 /// first, each kept where the partition stays realisable; the number of regions added
 /// (`r.plane_halvings`, counted in `r.splits` too). `r`'s planes become its regions'
@@ -1371,7 +1375,10 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
     let before = n;
     let mut unsplittable = vec![false; n];
     let halve = |labels: &mut [u32], c: u32, n: usize, axis: usize| {
-        super::lloyd::split_region_planes(s.topo, &s.moments, labels, c, n as u32, 10, axis)
+        let metric = super::lloyd::Planes {
+            moments: &s.moments,
+        };
+        super::lloyd::halve(s.topo, &metric, labels, c, n as u32, 10, axis)
     };
     if let Some(b) = spend_budget(
         s,
