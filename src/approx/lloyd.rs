@@ -156,7 +156,9 @@ pub fn relax_subset<M: Metric>(
     let mut next: Vec<u32> = labels.to_vec();
     // Regions each face has been offered to this round (a face has three neighbours).
     let mut offered: Vec<[u32; 3]> = vec![[u32::MAX; 3]; labels.len()];
-    let mut heap: BinaryHeap<Reverse<(u64, usize, u32)>> = BinaryHeap::new();
+    // (error bits, face, region): faces as u32 keep an entry at 16 bytes (the flood is the
+    // heap's pushes and pops) and order as the indices do.
+    let mut heap: BinaryHeap<Reverse<(u64, u32, u32)>> = BinaryHeap::new();
     let mut changed_rounds = 0;
     // The members' labels one and two rounds back: a round is a function of the labels, so
     // labels equal to those two rounds back repeat with period two from then on.
@@ -183,7 +185,7 @@ pub fn relax_subset<M: Metric>(
         // second entry (from another neighbour in the same region) would pop right after the
         // first and be skipped.
         heap.clear();
-        let mut offer = |heap: &mut BinaryHeap<Reverse<(u64, usize, u32)>>, g: usize, c: u32| {
+        let mut offer = |heap: &mut BinaryHeap<Reverse<(u64, u32, u32)>>, g: usize, c: u32| {
             let o = &mut offered[g];
             if o.contains(&c) {
                 return;
@@ -192,7 +194,7 @@ pub fn relax_subset<M: Metric>(
                 *slot = c;
             }
             let e = metric.err(g, &proxy[c as usize]);
-            heap.push(Reverse((e.to_bits(), g, c)));
+            heap.push(Reverse((e.to_bits(), g as u32, c)));
         };
         for (c, s) in seed.iter().enumerate() {
             if let Some((_, f)) = *s {
@@ -203,6 +205,7 @@ pub fn relax_subset<M: Metric>(
             }
         }
         while let Some(Reverse((_, f, c))) = heap.pop() {
+            let f = f as usize;
             if next[f] != u32::MAX {
                 continue;
             }

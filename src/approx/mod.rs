@@ -27,8 +27,10 @@
 //!    again and the planes refitted (stage 5 again) — kept only if valid and nearer.
 //!
 //! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the valid polygon mesh
-//! nearest the input is kept. OUT.obj is the triangulation of the polygons: the connectivity
-//! inside each region is new.
+//! nearest the input is kept. If it has fewer than K regions, the budget left goes to halvings
+//! of its regions into the two planes that fit each best ([`outline::spend_on_two_planes`]),
+//! then stages 5–6 again, kept if nearer. OUT.obj is the triangulation of the polygons: the
+//! connectivity inside each region is new.
 #![forbid(unsafe_code)]
 
 pub mod cluster;
