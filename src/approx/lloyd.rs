@@ -39,11 +39,14 @@ pub(super) fn neighbors(topo: &Topology, f: usize) -> impl Iterator<Item = usize
 /// What a Lloyd round fits to each region (its proxy) and how far a face is from a proxy.
 pub trait Metric {
     type Proxy: Clone;
+    /// How many directions of a region's spread a budget halving tries, in turn (see
+    /// `outline::spend_budget`).
+    const AXES: usize;
     /// The proxies of regions `0..count` fitted to the faces `members` (each with its label).
     fn proxies(&self, labels: &[u32], members: &[usize], count: usize) -> Vec<Self::Proxy>;
     /// The error of face `f` against proxy `p` (non-negative).
     fn err(&self, f: usize, p: &Self::Proxy) -> f64;
-    /// The point of face `f` a region is halved by ([`halve`]: across the main direction of
+    /// The point of face `f` a region is halved by ([`halve`]: across a direction of
     /// their spread) and its weight.
     fn key(&self, f: usize) -> V3;
     fn weight(&self, f: usize) -> f64;
@@ -62,6 +65,9 @@ pub struct Normals<'a> {
 
 impl Metric for Normals<'_> {
     type Proxy = V3;
+    /// The main direction only: the normals of a region turn most along it (a curved
+    /// region's cut); the second was not measured for them.
+    const AXES: usize = 1;
     fn proxies(&self, labels: &[u32], members: &[usize], count: usize) -> Vec<V3> {
         let mut sums = vec![[0.0; 3]; count];
         for &f in members {
@@ -98,6 +104,11 @@ pub struct Planes<'a> {
 
 impl Metric for Planes<'_> {
     type Proxy = Option<Plane>;
+    /// Both directions of the centroids' spread: a twisted region (its normal turning about
+    /// the direction it is long in) halved across that direction gives two planes that meet
+    /// along a line running across the cut, which their polygons cannot share; halved along
+    /// it, they may (BENCHMARKS, planar approximation round 18).
+    const AXES: usize = 2;
     fn proxies(&self, labels: &[u32], members: &[usize], count: usize) -> Vec<Option<Plane>> {
         let mut sums = vec![Moments::default(); count];
         for &f in members {
@@ -426,14 +437,7 @@ mod tests {
     fn two_plane_split_moves_the_cut_to_an_off_centre_ridge() {
         let (n, r) = (12usize, 3usize);
         let (mesh, topo) = crate::approx::testing::roof(n as u32, r as u32);
-        let moments: Vec<Moments> = mesh
-            .faces
-            .iter()
-            .map(|f| {
-                let [a, b, c] = f.map(|v| mesh.positions[v as usize]);
-                Moments::triangle(a, b, c)
-            })
-            .collect();
+        let moments = Moments::of_faces(&mesh.positions, &mesh.faces);
         let mut labels = vec![0u32; 2 * n];
         assert!(halve(
             &topo,

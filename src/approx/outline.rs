@@ -67,6 +67,18 @@ impl Moments {
         }
     }
 
+    /// The moments of each face of `faces` (vertex indices into `pos`).
+    pub fn of_faces(pos: &[V3], faces: &[[u32; 3]]) -> Vec<Moments> {
+        faces
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|i| pos[i as usize]);
+                Moments::triangle(a, b, c)
+            })
+            .collect()
+    }
+
+    /// The area of the faces.
     pub fn area(&self) -> f64 {
         self.area
     }
@@ -1094,13 +1106,7 @@ impl<'a> Surface<'a> {
             star_faces,
             on_border,
             face_box,
-            moments: faces
-                .iter()
-                .map(|f| {
-                    let [a, b, c] = f.map(|i| pos[i as usize]);
-                    Moments::triangle(a, b, c)
-                })
-                .collect(),
+            moments: Moments::of_faces(pos, faces),
             tol: 1e-6 * crate::vol::tet::bbox_diagonal(pos),
         }
     }
@@ -1108,11 +1114,23 @@ impl<'a> Surface<'a> {
     /// Splits region `r` of `labels` in two, the new half labelled `n` (Lloyd, 10 rounds;
     /// [`super::lloyd::halve`] under [`super::lloyd::Normals`]). False when it cannot be halved.
     fn split(&self, labels: &mut [u32], r: u32, n: usize) -> bool {
-        let metric = super::lloyd::Normals {
+        super::lloyd::halve(
+            self.topo,
+            &self.normals_metric(),
+            labels,
+            r,
+            n as u32,
+            10,
+            0,
+        )
+    }
+
+    /// VSA's L2,1 metric on the input's faces (what the realisation's splits follow).
+    fn normals_metric(&self) -> super::lloyd::Normals<'_> {
+        super::lloyd::Normals {
             normals: self.normals,
             areas: self.areas,
-        };
-        super::lloyd::halve(self.topo, &metric, labels, r, n as u32, 10, 0)
+        }
     }
 
     /// The faces around `v` in counter-clockwise order and whether `v` is on the border
@@ -1177,7 +1195,6 @@ pub fn realise(
     let mut seen = HashSet::new();
     let mut unsplittable: Vec<bool> = vec![false; n];
     let split = |labels: &mut [u32], r: u32, n: usize| s.split(labels, r, n);
-    let halve_normals = |labels: &mut [u32], r: u32, n: usize, _axis: usize| s.split(labels, r, n);
     let (mut polygons, mut triangles, mut triangle_region) = loop {
         let fits = Fits::new(face_moments, &labels, n);
         let defect = match build(s, &labels, &fits.planes()) {
@@ -1300,16 +1317,8 @@ pub fn realise(
     // quarter of the region's residual), then the boundaries the merges removed, then wherever
     // it lowers the residual at all.
     let before = n;
-    if let Some(b) = spend_budget(
-        s,
-        &mut labels,
-        &mut n,
-        k,
-        &mut unsplittable,
-        0.25,
-        halve_normals,
-        1,
-    ) {
+    let normals = s.normals_metric();
+    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 0.25, &normals) {
         (polygons, triangles, triangle_region) = b;
     }
     // Then the boundaries of the given partition that the realisation merged away, where
@@ -1324,16 +1333,7 @@ pub fn realise(
     }
     // Regions left alone at a quarter are tried again at any gain.
     let mut unsplittable = vec![false; n];
-    if let Some(b) = spend_budget(
-        s,
-        &mut labels,
-        &mut n,
-        k,
-        &mut unsplittable,
-        1.0,
-        halve_normals,
-        1,
-    ) {
+    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 1.0, &normals) {
         (polygons, triangles, triangle_region) = b;
     }
     splits += n - before;
@@ -1364,32 +1364,16 @@ pub fn realise(
 /// normal turns, which curvature asks for); when none of those can be realised, budget left is
 /// error left on the table, and the two-plane halving of a region may be realisable where its
 /// normals' is not — its cut follows where its planes meet.
-///
-/// Why two directions: a region's faces spread over a surface, along two main directions. A
-/// twisted region (its normal turning about the direction it is long in) halved across that
-/// direction gives two planes that meet along a line running across the cut, which their
-/// polygons cannot share; halved along it, they may. So a region whose halving across its
-/// main direction cannot be realised is halved across the second one too.
+/// A region whose halving across its main direction cannot be realised is halved across the
+/// second one too (why: [`super::lloyd::Planes`]'s `AXES`).
 pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize {
     let mut n = r.planes.len();
     let before = n;
     let mut unsplittable = vec![false; n];
-    let halve = |labels: &mut [u32], c: u32, n: usize, axis: usize| {
-        let metric = super::lloyd::Planes {
-            moments: &s.moments,
-        };
-        super::lloyd::halve(s.topo, &metric, labels, c, n as u32, 10, axis)
+    let planes = super::lloyd::Planes {
+        moments: &s.moments,
     };
-    if let Some(b) = spend_budget(
-        s,
-        &mut r.labels,
-        &mut n,
-        k,
-        &mut unsplittable,
-        1.0,
-        halve,
-        2,
-    ) {
+    if let Some(b) = spend_budget(s, &mut r.labels, &mut n, k, &mut unsplittable, 1.0, &planes) {
         (r.polygons, r.triangles, r.triangle_region) = b;
         r.planes = Fits::new(&s.moments, &r.labels, n).planes();
     }
@@ -1400,8 +1384,8 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
 }
 
 /// Spends the budget left (`n` of `k` regions used) on the worst-fitting region while its
-/// split by `halve` (labels, region, new label, direction → halved?; directions `0..axes`
-/// tried in turn) keeps at most `keep` of its residual and the partition stays realisable; a
+/// halving under `metric` ([`super::lloyd::halve`], its [`super::lloyd::Metric::AXES`]
+/// directions tried in turn) keeps at most `keep` of its residual and the partition stays realisable; a
 /// region whose split fails either way is not tried again (`unsplittable`). The polygon mesh
 /// of the last split kept.
 ///
@@ -1411,15 +1395,14 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
 /// sides, BENCHMARKS round 10). With `keep` = 1/4 the budget goes to curvature first; with 1
 /// what is left goes wherever it lowers the error — which is what the error at K planes asks
 /// for, once curvature and the boundaries the merges removed have had theirs.
-fn spend_budget(
+fn spend_budget<M: super::lloyd::Metric>(
     s: &Surface<'_>,
     labels: &mut Vec<u32>,
     n: &mut usize,
     k: usize,
     unsplittable: &mut Vec<bool>,
     keep: f64,
-    halve: impl Fn(&mut [u32], u32, usize, usize) -> bool,
-    axes: usize,
+    metric: &M,
 ) -> Option<Built> {
     let face_moments = &s.moments[..];
     let mut last = None;
@@ -1432,9 +1415,17 @@ fn spend_budget(
             break;
         };
         let was = fits.fit[worst].1;
-        let tried = (0..axes).find_map(|axis| {
+        let tried = (0..M::AXES).find_map(|axis| {
             let mut trial = labels.clone();
-            if !halve(&mut trial, worst as u32, *n, axis) {
+            if !super::lloyd::halve(
+                s.topo,
+                metric,
+                &mut trial,
+                worst as u32,
+                *n as u32,
+                10,
+                axis,
+            ) {
                 return None;
             }
             let after = fits.with_split(face_moments, &trial, worst as u32, *n);
