@@ -10,7 +10,7 @@ use std::process::Command;
 
 use common::TempDir;
 use foldfree::approx::cluster::{cluster_faces, ClusterOptions};
-use foldfree::approx::geom::{dot, face_normals_areas, V3};
+use foldfree::approx::geom::{dot, face_normals_areas, PlaneRule, V3};
 use foldfree::approx::normals_l0::{smooth_normals, NormalL0Options};
 use foldfree::approx::outline::{self, Moments, Surface};
 use foldfree::approx::polygons::ear_clip;
@@ -521,6 +521,53 @@ fn pipeline_on_a_tube_gives_planar_strips_without_folds() {
     assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
 }
 
+/// A closed coin: radius 1, thickness `h`, `seg` segments around; caps as fans, the rim one
+/// band of quads; outward counter-clockwise faces.
+fn coin(seg: usize, h: f64) -> TriMesh {
+    let mut positions = vec![[0.0, 0.0, 0.0], [0.0, 0.0, h]];
+    for z in [0.0, h] {
+        for s in 0..seg {
+            let t = std::f64::consts::TAU * s as f64 / seg as f64;
+            positions.push([t.cos(), t.sin(), z]);
+        }
+    }
+    let bottom = |s: usize| (2 + s % seg) as u32;
+    let top = |s: usize| (2 + seg + s % seg) as u32;
+    let mut faces = Vec::new();
+    for s in 0..seg {
+        faces.push([0, bottom(s + 1), bottom(s)]);
+        faces.push([1, top(s), top(s + 1)]);
+        faces.push([bottom(s), bottom(s + 1), top(s + 1)]);
+        faces.push([bottom(s), top(s + 1), top(s)]);
+    }
+    TriMesh { positions, faces }
+}
+
+/// A coin a twentieth as thick as it is wide: each piece of its rim is thinner than it is bent
+/// (a sixth of the rim: sagitta 0.13 > thickness 0.05), so its least-squares plane lies across
+/// it, parallel to the caps, and no partition into K = 8 regions is realised on least-squares
+/// planes. On the planes the faces face (the fallback) the coin is a prism: every output
+/// valid, and the report says which rule made it.
+#[test]
+fn a_coin_is_realised_on_the_planes_its_faces_face() {
+    let m = coin(48, 0.05);
+    let t = topo(&m);
+    let out = approximate(&m, &t, &ApproxOptions::new(8), &mut |_| {}).unwrap();
+    let r = &out.report;
+    assert_eq!(r.plane_rule, PlaneRule::Facing, "{:?}", r.notes);
+    assert!(r
+        .notes
+        .iter()
+        .any(|n| n.contains("principal plane its faces face")));
+    assert!((3..=8).contains(&r.k_obtained), "{} regions", r.k_obtained);
+    assert!(r.max_planarity_deviation_rel <= 1e-6);
+    assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
+    assert_watertight(&out.polygons.polygons);
+    // The rim's regions stand on the caps: their planes are (nearly) vertical.
+    let caps = out.planes.iter().filter(|p| p.n[2].abs() > 0.99).count();
+    assert_eq!(caps, 2, "{:?}", out.planes);
+}
+
 /// Restarts: seeds after the tries are run only while no partition was realised; when none
 /// is, the error says which seeds were tried and nothing is returned. (A tube in two regions
 /// cannot be realised: the two halves' planes are parallel, and the tube in one region has an
@@ -628,7 +675,7 @@ fn moments_fit_planes_and_measure_a_merge() {
                 &Moments::triangle([10.0, 0.0, z], [10.0, 10.0, z], [0.0, 10.0, z]),
             )
         };
-    let (p, res) = tri(3.0).fit().unwrap();
+    let (p, res) = tri(3.0).fit(PlaneRule::LeastSquares).unwrap();
     assert!(
         (p.n[2] - 1.0).abs() < 1e-12 && (p.d + 3.0).abs() < 1e-12,
         "{p:?}"
@@ -636,7 +683,10 @@ fn moments_fit_planes_and_measure_a_merge() {
     assert!(res.abs() < 1e-9);
     // z = 1 and z = 3, area 100 each (wider than apart): the plane z = 2, every point 1
     // away: 200.
-    let (p, res) = tri(1.0).add(&tri(3.0)).fit().unwrap();
+    let (p, res) = tri(1.0)
+        .add(&tri(3.0))
+        .fit(PlaneRule::LeastSquares)
+        .unwrap();
     assert!(
         (p.n[2] - 1.0).abs() < 1e-12 && (p.d + 2.0).abs() < 1e-9,
         "{p:?}"

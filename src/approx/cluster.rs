@@ -12,7 +12,9 @@
 use std::cmp::Reverse;
 use std::collections::{BTreeSet, BinaryHeap};
 
-use super::geom::{add, dot, fit_plane, norm, normalize, scale, solve_dense, Plane, SplitMix, V3};
+use super::geom::{
+    add, dot, fit_plane, norm, normalize, scale, solve_dense, Plane, PlaneRule, SplitMix, V3,
+};
 use crate::mesh::{Topology, NO_FACE};
 
 /// Parameters of [`cluster_faces`].
@@ -438,7 +440,8 @@ fn corner_reach(x: V3, planes: &[Plane]) -> Option<f64> {
 /// realised, so the two edge-adjacent regions there with the closest normals are merged, until
 /// every corner's common point is within max(`max_reach`, `amplification` × the vertex's
 /// largest distance to those planes) of the vertex (planes fitted to the regions' vertices at
-/// `pos`), or `max_passes`. Returns the number of merges.
+/// `pos`, chosen by `rule`), or `max_passes`. Returns the number of merges.
+#[allow(clippy::too_many_arguments)]
 pub fn merge_unreachable_corners(
     topo: &Topology,
     faces: &[[u32; 3]],
@@ -449,6 +452,7 @@ pub fn merge_unreachable_corners(
     max_reach: f64,
     amplification: f64,
     max_passes: usize,
+    rule: PlaneRule,
 ) -> usize {
     let mut merges = 0;
     for _ in 0..max_passes {
@@ -466,7 +470,7 @@ pub fn merge_unreachable_corners(
             }
         }
         let planes: Vec<Option<Plane>> = (0..n)
-            .map(|c| fit_plane(members[c].iter().map(|&v| (pos[v], 1.0)), mean[c]))
+            .map(|c| fit_plane(members[c].iter().map(|&v| (pos[v], 1.0)), mean[c], rule))
             .collect();
         let mut target: Vec<u32> = (0..n as u32).collect();
         let mut touched = vec![false; n];

@@ -61,10 +61,52 @@ impl Plane {
     }
 }
 
-/// Least-squares plane through weighted points (PCA: normal = eigenvector of the smallest
-/// eigenvalue of the covariance), oriented along `orient` so that its normal agrees with the
-/// faces it stands for. `None` when there are no points or no weight.
-pub fn fit_plane(points: impl Iterator<Item = (V3, f64)> + Clone, orient: V3) -> Option<Plane> {
+/// Which principal plane of a region's faces (or points) is its plane.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlaneRule {
+    /// The least-squares plane (the smallest principal direction is the normal): the plane
+    /// nearest the faces, what the error is measured by.
+    #[default]
+    LeastSquares,
+    /// The principal plane the faces face: the principal direction nearest their mean normal
+    /// is the normal.
+    ///
+    /// Why: every principal direction is a stationary point of the squared distance, and the
+    /// smallest one gives the least-squares plane — but a region thinner than it is curved (a
+    /// rim or fillet bent along its length: its sagitta exceeds its width) has its
+    /// least-squares plane *across* its faces. Its polygon would be its outline seen edge-on
+    /// (the polygon's area is the outline's projection onto the plane, `n · Σ aᵢnᵢ`, near
+    /// zero), and its neighbours' planes meet it nearly parallel, far away: a flange's rim or
+    /// the wall of a bolt hole through it gets the flange's own plane. The plane the faces face
+    /// is the one they project onto with the largest area among the principal planes; on a
+    /// region flatter than it is wide it is the least-squares plane itself.
+    Facing,
+}
+
+/// The column of `vecs` (principal directions, eigenvalues decreasing) that `rule` takes as
+/// the normal of a region whose faces face `orient`; ties and a zero `orient` give the last
+/// (least-squares) one.
+pub fn principal_axis(vecs: &[[f64; 3]; 3], orient: V3, rule: PlaneRule) -> usize {
+    match rule {
+        PlaneRule::LeastSquares => 2,
+        PlaneRule::Facing => {
+            let col = |j: usize| dot([vecs[0][j], vecs[1][j], vecs[2][j]], orient).abs();
+            (0..3)
+                .rev()
+                .fold(2, |best, j| if col(j) > col(best) { j } else { best })
+        }
+    }
+}
+
+/// Plane through weighted points (PCA: its normal the principal direction of the covariance
+/// that `rule` picks), oriented along `orient` so that its normal agrees with the faces it
+/// stands for. `None` when there are no points or no weight.
+pub fn fit_plane(
+    points: impl Iterator<Item = (V3, f64)> + Clone,
+    orient: V3,
+    rule: PlaneRule,
+) -> Option<Plane> {
     let mut wsum = 0.0;
     let mut c = [0.0; 3];
     for (p, w) in points.clone() {
@@ -85,8 +127,8 @@ pub fn fit_plane(points: impl Iterator<Item = (V3, f64)> + Clone, orient: V3) ->
         }
     }
     let (_, vecs) = sym_eigen::<3>(&m);
-    // Eigenvalues are sorted decreasing, so column 2 is the normal.
-    let mut n = [vecs[0][2], vecs[1][2], vecs[2][2]];
+    let j = principal_axis(&vecs, orient, rule);
+    let mut n = [vecs[0][j], vecs[1][j], vecs[2][j]];
     n = normalize(n)?;
     if dot(n, orient) < 0.0 {
         n = scale(n, -1.0);
@@ -100,8 +142,10 @@ pub fn fit_plane(points: impl Iterator<Item = (V3, f64)> + Clone, orient: V3) ->
 /// majorises the absolute value (`|x| ≤ x²/2|r| + |r|/2`, equal at `x = r`) and is minimised
 /// exactly by [`fit_plane`], so no round increases the sum (Weiszfeld's argument) — up to the
 /// floor: residuals are floored at `floor` (a point on the plane would get an infinite
-/// weight), so the best plane met is returned, `start` if no round improves on it.
-pub fn l1_plane(points: &[(V3, f64)], start: Plane, floor: f64) -> Plane {
+/// weight), so the best plane met is returned, `start` if no round improves on it. Under
+/// [`PlaneRule::Facing`] each round fits the weighted plane the points face instead (no
+/// longer a minimiser, so no round is promised a gain: the best met is still what returns).
+pub fn l1_plane(points: &[(V3, f64)], start: Plane, floor: f64, rule: PlaneRule) -> Plane {
     /// Rounds: each costs one pass over the points and a 3×3 eigenproblem. IRLS converges
     /// linearly; after 20 rounds the whole mesh's error was within 0.1 % of 100 rounds'
     /// (two corpus meshes at K 60, BENCHMARKS.md round 15).
@@ -118,7 +162,7 @@ pub fn l1_plane(points: &[(V3, f64)], start: Plane, floor: f64) -> Plane {
         let reweighted = points
             .iter()
             .map(|&(q, w)| (q, w / p.signed_distance(q).abs().max(floor)));
-        let Some(next) = fit_plane(reweighted, start.n) else {
+        let Some(next) = fit_plane(reweighted, start.n, rule) else {
             break;
         };
         p = next;
@@ -237,10 +281,37 @@ mod tests {
                 (add(add(scale(u, a), scale(w, b)), scale(n, -3.0)), 1.0)
             })
             .collect();
-        let p = fit_plane(pts.iter().copied(), scale(n, -1.0)).unwrap();
+        let p = fit_plane(pts.iter().copied(), scale(n, -1.0), PlaneRule::LeastSquares).unwrap();
         assert!((dot(p.n, n) + 1.0).abs() < 1e-10, "oriented along the hint");
         for (q, _) in &pts {
             assert!(p.signed_distance(*q).abs() < 1e-10);
+        }
+    }
+
+    /// A band a tenth of a unit wide around a third of a unit cylinder (sagitta 0.5 > width
+    /// 0.1): its least-squares plane is across it (normal along the axis, z); the plane its
+    /// faces face (normal x, the middle of the arc) is the facing rule's. A slightly bent sheet
+    /// as wide as it is long has one plane under both rules.
+    #[test]
+    fn a_thin_bent_band_faces_a_plane_other_than_its_least_squares_one() {
+        let band = |half_angle: f64, width: f64| -> Vec<(V3, f64)> {
+            (0..200)
+                .map(|i| {
+                    let t = half_angle * ((i % 20) as f64 / 9.5 - 1.0);
+                    ([t.cos(), t.sin(), width * (i / 20) as f64 / 9.0], 1.0)
+                })
+                .collect()
+        };
+        let fit = |pts: &[(V3, f64)], rule| fit_plane(pts.iter().copied(), [1.0, 0.0, 0.0], rule);
+        let across = band(std::f64::consts::PI / 3.0, 0.1);
+        let l2 = fit(&across, PlaneRule::LeastSquares).unwrap();
+        assert!(l2.n[2].abs() > 1.0 - 1e-9, "{l2:?}");
+        let facing = fit(&across, PlaneRule::Facing).unwrap();
+        assert!(facing.n[0] > 1.0 - 1e-9, "{facing:?}");
+        let sheet = band(0.3, 1.0);
+        for rule in [PlaneRule::LeastSquares, PlaneRule::Facing] {
+            let q = fit(&sheet, rule).unwrap();
+            assert!(q.n[0] > 1.0 - 1e-9, "{rule:?}: {q:?}");
         }
     }
 
@@ -253,9 +324,14 @@ mod tests {
             .map(|i| ([(i % 5) as f64, (i / 5) as f64, 0.0], 1.0))
             .collect();
         pts.push(([4.0, 4.0, 10.0], 1.0));
-        let l2 = fit_plane(pts.iter().copied(), [0.0, 0.0, 1.0]).unwrap();
+        let l2 = fit_plane(
+            pts.iter().copied(),
+            [0.0, 0.0, 1.0],
+            PlaneRule::LeastSquares,
+        )
+        .unwrap();
         assert!(l2.d.abs() > 0.1, "{l2:?}");
-        let l1 = l1_plane(&pts, l2, 1e-12);
+        let l1 = l1_plane(&pts, l2, 1e-12, PlaneRule::LeastSquares);
         assert!(l1.n[2] > 1.0 - 1e-9 && l1.d.abs() < 1e-6, "{l1:?}");
         let sum = |p: &Plane| -> f64 {
             pts.iter()
@@ -264,7 +340,7 @@ mod tests {
         };
         assert!((sum(&l1) - 10.0).abs() < 1e-5 && sum(&l1) < sum(&l2));
         // From the optimum it stays there.
-        let again = l1_plane(&pts, l1, 1e-12);
+        let again = l1_plane(&pts, l1, 1e-12, PlaneRule::LeastSquares);
         assert!(sum(&again) <= sum(&l1));
     }
 

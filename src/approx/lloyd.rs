@@ -23,7 +23,7 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-use super::geom::{add, normalize, scale, sub, Plane, V3};
+use super::geom::{add, normalize, scale, sub, Plane, PlaneRule, V3};
 use super::outline::Moments;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -100,6 +100,7 @@ impl Metric for Normals<'_> {
 /// the planes meet, and a junction where three are lies near their common point.
 pub struct Planes<'a> {
     pub moments: &'a [Moments],
+    pub rule: PlaneRule,
 }
 
 impl Metric for Planes<'_> {
@@ -115,7 +116,9 @@ impl Metric for Planes<'_> {
             let c = labels[f] as usize;
             sums[c] = sums[c].add(&self.moments[f]);
         }
-        sums.iter().map(|m| m.fit().map(|(p, _)| p)).collect()
+        sums.iter()
+            .map(|m| m.fit(self.rule).map(|(p, _)| p))
+            .collect()
     }
     fn err(&self, f: usize, p: &Option<Plane>) -> f64 {
         p.map_or(f64::INFINITY, |p| self.moments[f].sq_distance(&p).max(0.0))
@@ -441,7 +444,10 @@ mod tests {
         let mut labels = vec![0u32; 2 * n];
         assert!(halve(
             &topo,
-            &Planes { moments: &moments },
+            &Planes {
+                moments: &moments,
+                rule: PlaneRule::LeastSquares,
+            },
             &mut labels,
             0,
             1,

@@ -29,7 +29,9 @@
 //! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the valid polygon mesh
 //! nearest the input is kept. If it has fewer than K regions, the budget left goes to halvings
 //! of its regions into the two planes that fit each best ([`outline::spend_on_two_planes`]),
-//! then stages 5–6 again, kept if nearer. OUT.obj is the triangulation of the polygons: the
+//! then stages 5–6 again, kept if nearer. If no draw is realised, the tries are made again
+//! with each region on the principal plane its faces face ([`geom::PlaneRule::Facing`]: a thin
+//! bent region's least-squares plane lies across it). OUT.obj is the triangulation of the polygons: the
 //! connectivity inside each region is new.
 #![forbid(unsafe_code)]
 
@@ -49,7 +51,7 @@ use std::time::Instant;
 use crate::linalg::SolveError;
 use crate::mesh::{MeshError, Topology, TriMesh};
 use cluster::ClusterOptions;
-use geom::{dot, face_normals_areas, Plane, V3};
+use geom::{dot, face_normals_areas, Plane, PlaneRule, V3};
 use normals_l0::NormalL0Options;
 use vertex_update::VertexUpdateOptions;
 
@@ -263,6 +265,10 @@ pub struct ApproxReport {
     /// the kept mesh where no region's normal halving could be realised and budget was left
     /// (see [`outline::spend_on_two_planes`]).
     pub plane_halvings: usize,
+    /// How each region's plane was chosen among its faces' principal planes: `least_squares`,
+    /// or `facing` where no draw could be realised on the least-squares planes (see
+    /// [`PlaneRule`]; a note says so).
+    pub plane_rule: PlaneRule,
     /// Region merges at corners whose planes meet too far away, and of closed regions left
     /// with fewer than three neighbours by them.
     pub corner_merges: usize,
@@ -375,6 +381,57 @@ fn best_run(
     progress: &mut dyn FnMut(Stage),
 ) -> Result<ApproxOutput, ApproxError> {
     let t = Instant::now();
+    let smoothed = smooth(mesh, topo, opts, progress)?;
+    let mut surface = outline::Surface::new(topo, mesh, &smoothed.n0, &smoothed.a0);
+    let mut runs = 0;
+    // Every region on its least-squares plane first (the nearest plane); where no draw can be
+    // realised so, every region on the principal plane its faces face ([`PlaneRule::Facing`]):
+    // thin bent regions — a flange's rim, a bolt hole's wall — have their least-squares
+    // planes across them, parallel to their neighbours'. The second pass makes the draws
+    // made in any case (`tries`), not the restarts the first one spent: a mesh neither rule
+    // realises is told so in the time of about two passes' tries plus the restarts.
+    let tries_only = opts.tries.max(1) - 1;
+    let last = opts.restarts.max(tries_only);
+    let least_squares = match best_on(
+        mesh, opts, last, &smoothed, &surface, t, &mut runs, progress,
+    ) {
+        Err(ApproxError::Unrealisable(why)) => why,
+        done => return done,
+    };
+    surface.rule = PlaneRule::Facing;
+    best_on(
+        mesh, opts, tries_only, &smoothed, &surface, t, &mut runs, progress,
+    )
+    .map_err(|e| match e {
+        ApproxError::Unrealisable(facing) => ApproxError::Unrealisable(format!(
+            "no run of seeds {}..={} gave a valid polygon mesh with at most K = {} regions on \
+             the regions' least-squares planes (the last: {least_squares}), nor of seeds \
+             {}..={} on the planes their faces face (the last: {facing}); nothing was written \
+             (a larger K, or more --restarts, may)",
+            opts.seed,
+            opts.seed.wrapping_add(last as u64),
+            opts.k,
+            opts.seed,
+            opts.seed.wrapping_add(tries_only as u64),
+        )),
+        e => e,
+    })
+}
+
+/// The draws of [`best_run`] on `surface` (its plane rule), seeds `opts.seed ..= opts.seed +
+/// last` at most, the nearest valid one kept and finished; `runs` counts the realisations
+/// made, `t` is when the whole run started.
+#[allow(clippy::too_many_arguments)]
+fn best_on(
+    mesh: &TriMesh,
+    opts: &ApproxOptions,
+    last: usize,
+    smoothed: &Smoothed,
+    surface: &outline::Surface<'_>,
+    t: Instant,
+    runs: &mut usize,
+    progress: &mut dyn FnMut(Stage),
+) -> Result<ApproxOutput, ApproxError> {
     let bad = |o: &Run| o.report.flipped_faces + o.report.degenerate_faces;
     // A realisation that ends more than a quarter farther from the input than the partition
     // it was given has lost its planes to merges (a cascade); another seed's partition is an
@@ -386,9 +443,6 @@ fn best_run(
     let key = |o: &Run| (bad(o), o.report.mean_input_distance);
     let mut best: Option<(Run, Partitioned)> = None;
     let mut unrealised: Option<ApproxError> = None;
-    let mut runs = 0;
-    let smoothed = smooth(mesh, topo, opts, progress)?;
-    let surface = outline::Surface::new(topo, mesh, &smoothed.n0, &smoothed.a0);
     let with_seed = |seed: u64| {
         let mut sub = opts.clone();
         sub.seed = seed;
@@ -399,7 +453,7 @@ fn best_run(
     // alone too, and the mesh nearer the input kept.
     let nearer_with_merges_alone = |o: Run, part: &Partitioned, progress: &mut dyn FnMut(Stage)| {
         let sub = with_seed(o.report.seed_used);
-        match realise(mesh, &surface, &sub, &smoothed, part, false, progress) {
+        match realise(mesh, surface, &sub, smoothed, part, false, progress) {
             Ok(m) if key(&m) < key(&o) => Ok(m),
             Ok(_) | Err(ApproxError::Unrealisable(_)) => Ok(o),
             Err(e) => Err(e),
@@ -412,10 +466,10 @@ fn best_run(
     // once both are realised. (One with all K regions is realised so only if kept.)
     let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
         let sub = with_seed(seed);
-        let part = partition(mesh, &surface, &sub, &smoothed, progress);
-        let (out, made) = match realise(mesh, &surface, &sub, &smoothed, &part, true, progress) {
+        let part = partition(mesh, surface, &sub, smoothed, progress);
+        let (out, made) = match realise(mesh, surface, &sub, smoothed, &part, true, progress) {
             Err(ApproxError::Unrealisable(_)) => (
-                realise(mesh, &surface, &sub, &smoothed, &part, false, progress),
+                realise(mesh, surface, &sub, smoothed, &part, false, progress),
                 2,
             ),
             Ok(o) if o.report.regions_dissolved > 0 && o.report.k_obtained < sub.k => {
@@ -426,7 +480,6 @@ fn best_run(
         (out.map(|o| (o, part)), made)
     };
     let tries = opts.tries.max(1);
-    let last = opts.restarts.max(tries - 1);
     // The draws are independent (each only reads the smoothed surface): two at a time on two
     // threads, always two (not the machine's core count), so the draws made — and the mesh
     // kept, the nearest of them all — do not depend on the machine. A restart drawn beside
@@ -454,7 +507,7 @@ fn best_run(
         };
         for (out, made) in drawn {
             i += 1;
-            runs += made;
+            *runs += made;
             match out {
                 Ok((out, part)) => {
                     if best.as_ref().is_none_or(|b| key(&out) < key(&b.0)) {
@@ -474,25 +527,16 @@ fn best_run(
     // merges alone too.
     if let Some((b, part)) = best.take() {
         let b = if b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k {
-            runs += 1;
+            *runs += 1;
             nearer_with_merges_alone(b, &part, progress)?
         } else {
             b
         };
         best = Some((b, part));
     }
+    // Unrealisable: the last draw's defect (the caller says which draws failed).
     let Some((mut best, part)) = best else {
-        let why = match unrealised {
-            Some(ApproxError::Unrealisable(m)) => m,
-            _ => String::new(),
-        };
-        return Err(ApproxError::Unrealisable(format!(
-            "no run of seeds {}..={} gave a valid polygon mesh with at most K = {} regions (the \
-             last: {why}); nothing was written (a larger K, or more --restarts, may)",
-            opts.seed,
-            opts.seed.wrapping_add(last as u64),
-            opts.k
-        )));
+        return Err(unrealised.unwrap_or(ApproxError::Unrealisable(String::new())));
     };
     // Budget the kept mesh left unused (no region's normal halving could be realised) goes to
     // two-plane halvings, then the planes are refitted and the borders relabelled again; kept
@@ -500,16 +544,16 @@ fn best_run(
     if best.report.k_obtained < opts.k {
         let t = Instant::now();
         let mut r = best.realised.clone();
-        if outline::spend_on_two_planes(&surface, &mut r, opts.k) > 0 {
+        if outline::spend_on_two_planes(surface, &mut r, opts.k) > 0 {
             let sub = with_seed(best.report.seed_used);
             let before = best.report.seconds.polygons;
-            let halved = finish(mesh, &surface, &sub, &smoothed, &part, r, t, before);
+            let halved = finish(mesh, surface, &sub, smoothed, &part, r, t, before);
             if key(&halved) < key(&best) {
                 best = halved;
             }
         }
     }
-    best.report.runs = runs;
+    best.report.runs = *runs;
     best.report.seconds_all_runs = t.elapsed().as_secs_f64();
     Ok(best.into())
 }
@@ -635,6 +679,7 @@ fn partition(
         opts.corner_reach_rel * diag,
         opts.corner_amplification,
         64,
+        surface.rule,
     );
     let collapse_merges = cluster::merge_collapsing_regions(topo, &mut labels, n0, a0);
     let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut labels);
@@ -645,6 +690,7 @@ fn partition(
         &at,
         &outline::fit_planes(surface, &labels, n),
         diag,
+        surface.rule,
     );
     let error = input_distances(&mesh.positions, &at, &planes).0;
     Partitioned {
@@ -688,7 +734,7 @@ fn refit(
     diag: f64,
 ) {
     let n = r.planes.len();
-    let l1 = l1_planes(pos, regions_at, &r.planes, diag);
+    let l1 = l1_planes(pos, regions_at, &r.planes, diag, surface.rule);
     // Share of the way from the least-squares plane to the least-absolute-distances one.
     let mut t = vec![1.0f64; n];
     let mut builds = 0;
@@ -769,7 +815,13 @@ fn build_checked(
 /// Each region's least-absolute-distances plane ([`geom::l1_plane`]) of its input vertices,
 /// a vertex on `m` regions weighing `1/m` in each (so the sum over regions is the headline
 /// error, [`input_distances`]), from its plane in `start`.
-fn l1_planes(pos: &[V3], regions_at: &[Vec<u32>], start: &[Plane], diag: f64) -> Vec<Plane> {
+fn l1_planes(
+    pos: &[V3],
+    regions_at: &[Vec<u32>],
+    start: &[Plane],
+    diag: f64,
+    rule: PlaneRule,
+) -> Vec<Plane> {
     let mut members: Vec<Vec<(V3, f64)>> = vec![Vec::new(); start.len()];
     for (v, cs) in regions_at.iter().enumerate() {
         for &c in cs {
@@ -781,7 +833,7 @@ fn l1_planes(pos: &[V3], regions_at: &[Vec<u32>], start: &[Plane], diag: f64) ->
     members
         .iter()
         .zip(start)
-        .map(|(m, &p)| geom::l1_plane(m, p, floor))
+        .map(|(m, &p)| geom::l1_plane(m, p, floor, rule))
         .collect()
 }
 
@@ -955,6 +1007,14 @@ fn finish(
             r.defects.len()
         ));
     }
+    if surface.rule == PlaneRule::Facing {
+        notes.push(
+            "no partition could be realised with every region on its least-squares plane; each \
+             region is on the principal plane its faces face (a thin bent region — a rim, a \
+             fillet, a bolt hole's wall — has its least-squares plane across it)"
+                .to_string(),
+        );
+    }
     let euler_input = surface.topo.euler_characteristic;
     let euler_polygons = r.polygons.euler_characteristic();
     if euler_polygons != euler_input {
@@ -993,6 +1053,7 @@ fn finish(
         faces_reassigned: f.faces_reassigned,
         regions_dissolved: r.dissolved,
         plane_halvings: r.plane_halvings,
+        plane_rule: surface.rule,
         lloyd_rounds: f.lloyd_rounds,
         regions_split: r.splits,
         merges: r.merges,

@@ -23,7 +23,7 @@
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, HashSet};
 
-use super::geom::{add, cross, dot, normalize, scale, sub, Plane, V3};
+use super::geom::{add, cross, dot, normalize, principal_axis, scale, sub, Plane, PlaneRule, V3};
 use super::intersect::first_crossing;
 use super::polygons::{
     area2, basis, bridge_holes, ear_clip, orient, region_loops, segments_cross, PolygonMesh,
@@ -129,9 +129,10 @@ impl Moments {
         }
     }
 
-    /// The plane minimising the integral of the squared distance over the faces, oriented
-    /// along their normals, and that integral.
-    pub fn fit(&self) -> Option<(Plane, f64)> {
+    /// The principal plane of the faces that `rule` picks (under
+    /// [`PlaneRule::LeastSquares`] the one minimising the integral of the squared distance over
+    /// the faces), oriented along their normals, and that integral.
+    pub fn fit(&self, rule: PlaneRule) -> Option<(Plane, f64)> {
         if self.area <= 0.0 {
             return None;
         }
@@ -143,12 +144,13 @@ impl Moments {
             }
         }
         let (vals, vecs) = sym_eigen::<3>(&cov);
-        // Eigenvalues decrease: the last vector is the normal, its value the residual.
-        let mut n = normalize([vecs[0][2], vecs[1][2], vecs[2][2]])?;
+        // The principal direction the faces face is the normal, its value the residual.
+        let j = principal_axis(&vecs, self.normal, rule);
+        let mut n = normalize([vecs[0][j], vecs[1][j], vecs[2][j]])?;
         if dot(n, self.normal) < 0.0 {
             n = scale(n, -1.0);
         }
-        Some((Plane { n, d: -dot(n, c) }, vals[2].max(0.0)))
+        Some((Plane { n, d: -dot(n, c) }, vals[j].max(0.0)))
     }
 }
 
@@ -753,16 +755,27 @@ fn adjacent_pairs(topo: &Topology, labels: &[u32]) -> Vec<(u32, u32)> {
 struct Fits {
     region: Vec<Moments>,
     fit: Vec<(Plane, f64)>,
+    rule: PlaneRule,
 }
 
 impl Fits {
-    fn new(face: &[Moments], labels: &[u32], n: usize) -> Fits {
+    /// The fits of `s`'s faces under `labels`, by the surface's plane rule.
+    fn new(s: &Surface<'_>, labels: &[u32], n: usize) -> Fits {
         let mut region = vec![Moments::default(); n];
         for (f, &r) in labels.iter().enumerate() {
-            region[r as usize] = region[r as usize].add(&face[f]);
+            region[r as usize] = region[r as usize].add(&s.moments[f]);
         }
-        let fit = region.iter().map(fit_or_flat).collect();
-        Fits { region, fit }
+        let fit = region.iter().map(|m| fit_or_flat(m, s.rule)).collect();
+        Fits {
+            region,
+            fit,
+            rule: s.rule,
+        }
+    }
+
+    /// The plane of faces with moments `m` and its residual, by the same rule.
+    fn of(&self, m: &Moments) -> (Plane, f64) {
+        fit_or_flat(m, self.rule)
     }
 
     /// `self` after the faces of region `r` that `labels` gives the label `n` (= the region
@@ -780,10 +793,14 @@ impl Fits {
         let mut region = self.region.clone();
         let mut fit = self.fit.clone();
         region[r as usize] = kept;
-        fit[r as usize] = fit_or_flat(&kept);
+        fit[r as usize] = self.of(&kept);
         region.push(moved);
-        fit.push(fit_or_flat(&moved));
-        Fits { region, fit }
+        fit.push(self.of(&moved));
+        Fits {
+            region,
+            fit,
+            rule: self.rule,
+        }
     }
 
     fn planes(&self) -> Vec<Plane> {
@@ -793,7 +810,7 @@ impl Fits {
     /// How much worse the merged region fits than the two apart.
     fn merge_cost(&self, (a, b): (u32, u32)) -> f64 {
         let merged = self.region[a as usize].add(&self.region[b as usize]);
-        fit_or_flat(&merged).1 - self.fit[a as usize].1 - self.fit[b as usize].1
+        self.of(&merged).1 - self.fit[a as usize].1 - self.fit[b as usize].1
     }
 
     /// The adjacent pair among `pairs` whose merge costs least.
@@ -806,8 +823,8 @@ impl Fits {
     }
 }
 
-fn fit_or_flat(m: &Moments) -> (Plane, f64) {
-    m.fit().unwrap_or((
+fn fit_or_flat(m: &Moments, rule: PlaneRule) -> (Plane, f64) {
+    m.fit(rule).unwrap_or((
         Plane {
             n: [0.0, 0.0, 1.0],
             d: 0.0,
@@ -971,7 +988,7 @@ fn dissolve(
     }
     let mut grow = -fits.fit[r as usize].1;
     for (q, g) in gained.iter().enumerate().filter(|(_, g)| g.area > 0.0) {
-        grow += fit_or_flat(&fits.region[q].add(g)).1 - fits.fit[q].1;
+        grow += fits.of(&fits.region[q].add(g)).1 - fits.fit[q].1;
     }
     for l in out.iter_mut() {
         if *l > r {
@@ -1063,6 +1080,8 @@ pub struct Surface<'a> {
     /// Corners closer than this are one point (1e-6 of the bounding box diagonal, the output's
     /// planarity tolerance).
     tol: f64,
+    /// Which principal plane of a region's faces is its plane.
+    pub rule: PlaneRule,
 }
 
 impl<'a> Surface<'a> {
@@ -1108,6 +1127,7 @@ impl<'a> Surface<'a> {
             face_box,
             moments: Moments::of_faces(pos, faces),
             tol: 1e-6 * crate::vol::tet::bbox_diagonal(pos),
+            rule: PlaneRule::LeastSquares,
         }
     }
 
@@ -1196,7 +1216,7 @@ pub fn realise(
     let mut unsplittable: Vec<bool> = vec![false; n];
     let split = |labels: &mut [u32], r: u32, n: usize| s.split(labels, r, n);
     let (mut polygons, mut triangles, mut triangle_region) = loop {
-        let fits = Fits::new(face_moments, &labels, n);
+        let fits = Fits::new(s, &labels, n);
         let defect = match build(s, &labels, &fits.planes()) {
             Ok(x) => break x,
             Err(d) => d,
@@ -1337,7 +1357,7 @@ pub fn realise(
         (polygons, triangles, triangle_region) = b;
     }
     splits += n - before;
-    let planes = Fits::new(face_moments, &labels, n).planes();
+    let planes = Fits::new(s, &labels, n).planes();
     Ok(Realised {
         polygons,
         triangles,
@@ -1372,10 +1392,11 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
     let mut unsplittable = vec![false; n];
     let planes = super::lloyd::Planes {
         moments: &s.moments,
+        rule: s.rule,
     };
     if let Some(b) = spend_budget(s, &mut r.labels, &mut n, k, &mut unsplittable, 1.0, &planes) {
         (r.polygons, r.triangles, r.triangle_region) = b;
-        r.planes = Fits::new(&s.moments, &r.labels, n).planes();
+        r.planes = Fits::new(s, &r.labels, n).planes();
     }
     let added = n - before;
     r.splits += added;
@@ -1406,7 +1427,7 @@ fn spend_budget<M: super::lloyd::Metric>(
 ) -> Option<Built> {
     let face_moments = &s.moments[..];
     let mut last = None;
-    let mut fits = Fits::new(face_moments, labels, *n);
+    let mut fits = Fits::new(s, labels, *n);
     while *n < k {
         let Some(worst) = (0..*n)
             .filter(|&r| !unsplittable[r] && fits.fit[r].1 > 0.0)
@@ -1471,7 +1492,7 @@ fn resplit(
     tried: &mut HashSet<u64>,
 ) -> Option<Built> {
     let face_moments = &s.moments[..];
-    let fits = Fits::new(face_moments, labels, n);
+    let fits = Fits::new(s, labels, n);
     // Each connected part of a given region that one region holds, unless it is all of it
     // (whether the rest stays connected is checked when the candidate is tried).
     let pieces = parts(
@@ -1490,7 +1511,7 @@ fn resplit(
             continue; // the whole region
         }
         let rest = fits.region[r].sub(&pm);
-        let gain = fits.fit[r].1 - fit_or_flat(&pm).1 - fit_or_flat(&rest).1;
+        let gain = fits.fit[r].1 - fits.of(&pm).1 - fits.of(&rest).1;
         candidates.push((gain, part));
     }
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
@@ -1525,7 +1546,7 @@ fn resplit(
 
 /// Each region's least-squares plane.
 pub fn fit_planes(s: &Surface<'_>, labels: &[u32], n: usize) -> Vec<Plane> {
-    Fits::new(&s.moments, labels, n).planes()
+    Fits::new(s, labels, n).planes()
 }
 
 /// Connected components of the mesh without and with a border: a polygon mesh of it needs at
@@ -1666,7 +1687,7 @@ mod tests {
                     }
                 })
                 .collect();
-            let fits = Fits::new(&s.moments, &labels, 7);
+            let fits = Fits::new(s, &labels, 7);
             let band = fits.fit[6].1;
             assert!(band > 1e-4, "{band}");
             let (out, grow) = dissolve(s.topo, &s.moments, &fits, &labels, 6).unwrap();
