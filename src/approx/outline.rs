@@ -781,7 +781,8 @@ impl Fits {
     /// `self` after the faces of region `r` that `labels` gives the label `n` (= the region
     /// count) became region `n`: only the two regions' moments are summed again (in face
     /// order, as [`Fits::new`] sums them: the same values).
-    fn with_split(&self, face: &[Moments], labels: &[u32], r: u32, n: usize) -> Fits {
+    fn with_split(&self, s: &Surface<'_>, labels: &[u32], r: u32, n: usize) -> Fits {
+        let face = &s.moments;
         let (mut kept, mut moved) = (Moments::default(), Moments::default());
         for (f, &l) in labels.iter().enumerate() {
             if l == r {
@@ -1374,9 +1375,9 @@ pub fn realise(
 }
 
 /// Spends the budget `r` left (fewer than `k` regions) on halvings of its regions into the
-/// two planes that fit each best ([`super::lloyd::halve`] under [`super::lloyd::Planes`]: the cut lies where
-/// the two planes meet, so the edge their polygons share is where the faces were), worst fit
-/// first, each kept where the partition stays realisable; the number of regions added
+/// two planes that fit each best ([`super::lloyd::halve`] under [`super::lloyd::Planes`]: the
+/// cut lies where the two planes meet, so the edge their polygons share is where the faces
+/// were), worst fit first, each kept where the partition stays realisable; the number of regions added
 /// (`r.plane_halvings`, counted in `r.splits` too). `r`'s planes become its regions'
 /// least-squares planes where any was added.
 ///
@@ -1406,9 +1407,9 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
 
 /// Spends the budget left (`n` of `k` regions used) on the worst-fitting region while its
 /// halving under `metric` ([`super::lloyd::halve`], its [`super::lloyd::Metric::AXES`]
-/// directions tried in turn) keeps at most `keep` of its residual and the partition stays realisable; a
-/// region whose split fails either way is not tried again (`unsplittable`). The polygon mesh
-/// of the last split kept.
+/// directions tried in turn) keeps at most `keep` of its residual and the partition stays
+/// realisable; a region whose split fails either way is not tried again (`unsplittable`). The
+/// polygon mesh of the last split kept.
 ///
 /// Why `keep`: a region curved in one direction, halved across it, keeps 1/16 of its
 /// residual (the sagitta of a half is a quarter); a flat noisy one keeps most of it (each
@@ -1425,7 +1426,6 @@ fn spend_budget<M: super::lloyd::Metric>(
     keep: f64,
     metric: &M,
 ) -> Option<Built> {
-    let face_moments = &s.moments[..];
     let mut last = None;
     let mut fits = Fits::new(s, labels, *n);
     while *n < k {
@@ -1449,7 +1449,7 @@ fn spend_budget<M: super::lloyd::Metric>(
             ) {
                 return None;
             }
-            let after = fits.with_split(face_moments, &trial, worst as u32, *n);
+            let after = fits.with_split(s, &trial, worst as u32, *n);
             let kept = after.fit[worst].1 + after.fit[*n].1;
             if kept > keep * was || kept >= was {
                 return None;
@@ -1535,7 +1535,7 @@ fn resplit(
         if region_parts(s.topo, &trial, r).len() != 1 {
             continue;
         }
-        let planes = fits.with_split(face_moments, &trial, r, n).planes();
+        let planes = fits.with_split(s, &trial, r, n).planes();
         if let Ok(built) = build(s, &trial, &planes) {
             labels.copy_from_slice(&trial);
             return Some(built);
@@ -1544,7 +1544,8 @@ fn resplit(
     None
 }
 
-/// Each region's least-squares plane.
+/// Each region's plane: its faces' principal plane that the surface's rule picks (the
+/// least-squares one unless the draws fell back to [`PlaneRule::Facing`]).
 pub fn fit_planes(s: &Surface<'_>, labels: &[u32], n: usize) -> Vec<Plane> {
     Fits::new(s, labels, n).planes()
 }
