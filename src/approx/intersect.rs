@@ -25,14 +25,68 @@ fn segment_crosses(p: V3, q: V3, t: [V3; 3]) -> bool {
     (s[0] > 0.0 && s[1] > 0.0 && s[2] > 0.0) || (s[0] < 0.0 && s[1] < 0.0 && s[2] < 0.0)
 }
 
-/// Whether triangles `a` and `b` (corner indices into `pos`) cross. Triangles sharing an
+/// Whether every corner of `t` lies within `tol` of the plane of `on`.
+fn within(t: [V3; 3], on: [V3; 3], tol: f64) -> bool {
+    let n = cross(sub(on[1], on[0]), sub(on[2], on[0]));
+    let len = dot(n, n).sqrt();
+    t.iter().all(|&p| dot(n, sub(p, on[0])).abs() <= tol * len)
+}
+
+/// Whether triangles `a` and `b`, lying in one plane (normal `n`), overlap in their
+/// interiors: an edge of one properly crosses an edge of the other, a corner of one not
+/// shared lies strictly inside the other, or, sharing an edge, they lie on one side of it.
+fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
+    // The plane seen along its normal's largest axis, the other two kept in order so that
+    // orientations keep their sign up to that of the dropped axis (the same for both).
+    let m = (0..3)
+        .max_by(|&i, &j| n[i].abs().total_cmp(&n[j].abs()))
+        .unwrap_or(2);
+    let (u, v) = ((m + 1) % 3, (m + 2) % 3);
+    let p = |i: u32| [pos[i as usize][u], pos[i as usize][v]];
+    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    };
+    let shared: Vec<u32> = a.iter().copied().filter(|x| b.contains(x)).collect();
+    if shared.len() == 3 {
+        return true;
+    }
+    if let [s, t] = shared[..] {
+        let third = |x: [u32; 3]| x.into_iter().find(|&i| i != s && i != t);
+        return match (third(a), third(b)) {
+            (Some(x), Some(y)) => orient(p(s), p(t), p(x)) * orient(p(s), p(t), p(y)) > 0.0,
+            _ => false,
+        };
+    }
+    let edges = |t: [u32; 3]| (0..3).map(move |k| (t[k], t[(k + 1) % 3]));
+    let proper = |(w, x): (u32, u32), (y, z): (u32, u32)| {
+        ![y, z].contains(&w)
+            && ![y, z].contains(&x)
+            && orient(p(w), p(x), p(y)) * orient(p(w), p(x), p(z)) < 0.0
+            && orient(p(y), p(z), p(w)) * orient(p(y), p(z), p(x)) < 0.0
+    };
+    let inside = |i: u32, t: [u32; 3]| {
+        let o = edges(t).map(|(x, y)| orient(p(x), p(y), p(i)));
+        let o: Vec<f64> = o.collect();
+        o.iter().all(|&x| x > 0.0) || o.iter().all(|&x| x < 0.0)
+    };
+    edges(a).any(|e| edges(b).any(|f| proper(e, f)))
+        || a.iter().any(|&i| !b.contains(&i) && inside(i, b))
+        || b.iter().any(|&i| !a.contains(&i) && inside(i, a))
+}
+
+/// Whether triangles `a` and `b` (corner indices into `pos`) cross. Two that lie in one
+/// plane (each within `tol` of the other's) cross where they overlap ([`overlap_in_plane`]:
+/// the signs the tests below rest on are noise there). Otherwise triangles sharing an
 /// edge meet along it; sharing one corner, they cross exactly when an edge opposite the shared
 /// corner passes through the other (their planes' common line starts at the corner and leaves
 /// one of them through that edge); sharing none, when an edge of one passes through the other.
-fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3]) -> bool {
+fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3], tol: f64) -> bool {
     let shared: Vec<u32> = a.iter().copied().filter(|x| b.contains(x)).collect();
     let ta = a.map(|i| pos[i as usize]);
     let tb = b.map(|i| pos[i as usize]);
+    if within(tb, ta, tol) && within(ta, tb, tol) {
+        return overlap_in_plane(pos, a, b, cross(sub(ta[1], ta[0]), sub(ta[2], ta[0])));
+    }
     let edges = |t: [u32; 3]| (0..3).map(move |k| (t[k], t[(k + 1) % 3]));
     let through =
         |e: (u32, u32), t: [V3; 3]| segment_crosses(pos[e.0 as usize], pos[e.1 as usize], t);
@@ -49,8 +103,9 @@ fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3]) -> bool {
 }
 
 /// The regions of the first pair of triangles of different regions that cross, if any
-/// (a sweep over the triangles' x extents).
-pub fn first_crossing(pos: &[V3], tris: &[[u32; 3]], region: &[u32]) -> Option<[u32; 2]> {
+/// (a sweep over the triangles' x extents); triangles within `tol` of each other's planes
+/// are in one plane.
+pub fn first_crossing(pos: &[V3], tris: &[[u32; 3]], region: &[u32], tol: f64) -> Option<[u32; 2]> {
     let bbox = |t: &[u32; 3]| {
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
@@ -60,7 +115,8 @@ pub fn first_crossing(pos: &[V3], tris: &[[u32; 3]], region: &[u32]) -> Option<[
                 hi[k] = hi[k].max(pos[i as usize][k]);
             }
         }
-        (lo, hi)
+        // Grown by the tolerance: two triangles in one plane may be apart by noise.
+        (lo.map(|x| x - tol), hi.map(|x| x + tol))
     };
     let boxes: Vec<(V3, V3)> = tris.iter().map(bbox).collect();
     let mut order: Vec<usize> = (0..tris.len()).collect();
@@ -75,7 +131,7 @@ pub fn first_crossing(pos: &[V3], tris: &[[u32; 3]], region: &[u32]) -> Option<[
             {
                 continue;
             }
-            if cross_pair(pos, tris[a], tris[b]) {
+            if cross_pair(pos, tris[a], tris[b], tol) {
                 return Some([region[a], region[b]]);
             }
         }
@@ -101,9 +157,43 @@ mod tests {
             [0.5, -0.5, 0.5],
         ];
         let tris = [[0, 1, 2], [3, 4, 5], [1, 0, 6]];
-        assert_eq!(first_crossing(&pos, &tris[..2], &[0, 1]), Some([0, 1]));
-        assert_eq!(first_crossing(&pos, &[tris[0], tris[2]], &[0, 1]), None);
+        assert_eq!(
+            first_crossing(&pos, &tris[..2], &[0, 1], 1e-9),
+            Some([0, 1])
+        );
+        assert_eq!(
+            first_crossing(&pos, &[tris[0], tris[2]], &[0, 1], 1e-9),
+            None
+        );
         // Same region: not a crossing of the polygon mesh.
-        assert_eq!(first_crossing(&pos, &tris[..2], &[0, 0]), None);
+        assert_eq!(first_crossing(&pos, &tris[..2], &[0, 0], 1e-9), None);
+    }
+
+    /// Triangles of two regions lying in one plane (up to noise below the tolerance, on
+    /// either side) overlap where neither edge passes through the other: found; two that
+    /// meet along an edge from either side of it are not, two on one side of it are.
+    #[test]
+    fn overlapping_triangles_in_one_plane_are_found() {
+        let z = 1e-12;
+        let pos = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            // Inside the first, off its plane by less than the tolerance (all on one side: no
+            // edge passes through it).
+            [0.1, 0.1, z],
+            [0.5, 0.1, z],
+            [0.1, 0.5, z],
+            // Across the edge 1–2 from the first.
+            [1.0, 1.0, z],
+            // On the first's side of its edge 1–2.
+            [0.3, 0.3, -z],
+        ];
+        let inner = [[0, 1, 2], [3, 4, 5]];
+        assert_eq!(first_crossing(&pos, &inner, &[0, 1], 1e-9), Some([0, 1]));
+        let across = [[0, 1, 2], [2, 1, 6]];
+        assert_eq!(first_crossing(&pos, &across, &[0, 1], 1e-9), None);
+        let folded = [[0, 1, 2], [2, 1, 7]];
+        assert_eq!(first_crossing(&pos, &folded, &[0, 1], 1e-9), Some([0, 1]));
     }
 }

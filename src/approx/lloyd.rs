@@ -140,38 +140,45 @@ pub fn relax(
     labels: &mut [u32],
     rounds: usize,
 ) -> usize {
-    relax_subset(
-        topo,
-        &Normals { normals, areas },
-        labels,
-        &vec![true; labels.len()],
-        rounds,
-    )
+    let all: Vec<usize> = (0..labels.len()).collect();
+    relax_subset(topo, &Normals { normals, areas }, labels, &all, rounds)
 }
 
-/// [`relax`] where only faces with `movable[f]` may change region; the regions holding them
-/// compete for them and the rest of the partition is left as it is. Each region's proxy is
-/// taken from its movable faces (all of them for [`relax`]; for a split, the two halves are
-/// all movable), so a round costs the movable faces, not the mesh.
+/// [`relax`] where only the faces `members` (ascending) may change region; the regions
+/// holding them compete for them and the rest of the partition is left as it is. Each
+/// region's proxy is taken from its members (all faces for [`relax`]; for a split, the two
+/// halves), and the round works on arrays indexed by member, so a round costs the members,
+/// not the mesh — a split of a small region is as cheap as the region.
 pub fn relax_subset<M: Metric>(
     topo: &Topology,
     metric: &M,
     labels: &mut [u32],
-    movable: &[bool],
+    members: &[usize],
     rounds: usize,
 ) -> usize {
-    let members: Vec<usize> = (0..labels.len()).filter(|&f| movable[f]).collect();
     let count = members
         .iter()
         .map(|&f| labels[f] as usize + 1)
         .max()
         .unwrap_or(0);
-    // Faces not movable keep their label; movable ones are cleared each round.
-    let mut next: Vec<u32> = labels.to_vec();
-    // Regions each face has been offered to this round (a face has three neighbours).
-    let mut offered: Vec<[u32; 3]> = vec![[u32::MAX; 3]; labels.len()];
-    // (error bits, face, region): faces as u32 keep an entry at 16 bytes (the flood is the
-    // heap's pushes and pops) and order as the indices do.
+    // Members' edge neighbours among the members, as member indices (u32::MAX: none).
+    let local = |g: usize| members.binary_search(&g).map_or(u32::MAX, |i| i as u32);
+    let adjacent: Vec<[u32; 3]> = members
+        .iter()
+        .map(|&f| {
+            let mut a = [u32::MAX; 3];
+            for (slot, g) in a.iter_mut().zip(neighbors(topo, f)) {
+                *slot = local(g);
+            }
+            a
+        })
+        .collect();
+    // The label each member gets this round (u32::MAX: not reached yet).
+    let mut next: Vec<u32> = vec![u32::MAX; members.len()];
+    // Regions each member has been offered to this round (a face has three neighbours).
+    let mut offered: Vec<[u32; 3]> = vec![[u32::MAX; 3]; members.len()];
+    // (error bits, member, region): members as u32 keep an entry at 16 bytes (the flood is
+    // the heap's pushes and pops) and order as the face indices do (members ascend).
     let mut heap: BinaryHeap<Reverse<(u64, u32, u32)>> = BinaryHeap::new();
     let mut changed_rounds = 0;
     // The members' labels one and two rounds back: a round is a function of the labels, so
@@ -180,53 +187,53 @@ pub fn relax_subset<M: Metric>(
     let mut back1 = snapshot(labels);
     let mut back2: Vec<u32> = Vec::new();
     for round in 0..rounds {
-        let proxy = metric.proxies(labels, &members, count);
+        let proxy = metric.proxies(labels, members, count);
         let mut seed: Vec<Option<(f64, usize)>> = vec![None; count];
-        for &f in &members {
+        for (i, &f) in members.iter().enumerate() {
             let c = labels[f];
             let e = metric.err(f, &proxy[c as usize]);
             let s = &mut seed[c as usize];
             if s.is_none_or(|(be, _)| e < be) {
-                *s = Some((e, f));
+                *s = Some((e, i));
             }
         }
-        for &f in &members {
-            next[f] = u32::MAX;
-            offered[f] = [u32::MAX; 3];
-        }
+        next.fill(u32::MAX);
+        offered.fill([u32::MAX; 3]);
         // Keys are non-negative floats, whose bit patterns order like the values. A face is
         // offered to a region once: its key for that region is fixed within the round, so a
         // second entry (from another neighbour in the same region) would pop right after the
         // first and be skipped.
         heap.clear();
-        let mut offer = |heap: &mut BinaryHeap<Reverse<(u64, u32, u32)>>, g: usize, c: u32| {
-            let o = &mut offered[g];
+        let mut offer = |heap: &mut BinaryHeap<Reverse<(u64, u32, u32)>>, i: u32, c: u32| {
+            let o = &mut offered[i as usize];
             if o.contains(&c) {
                 return;
             }
             if let Some(slot) = o.iter_mut().find(|x| **x == u32::MAX) {
                 *slot = c;
             }
-            let e = metric.err(g, &proxy[c as usize]);
-            heap.push(Reverse((e.to_bits(), g as u32, c)));
+            let e = metric.err(members[i as usize], &proxy[c as usize]);
+            heap.push(Reverse((e.to_bits(), i, c)));
         };
         for (c, s) in seed.iter().enumerate() {
-            if let Some((_, f)) = *s {
-                next[f] = c as u32;
-                for g in neighbors(topo, f) {
-                    offer(&mut heap, g, c as u32);
+            if let Some((_, i)) = *s {
+                next[i] = c as u32;
+                for &j in &adjacent[i] {
+                    if j != u32::MAX {
+                        offer(&mut heap, j, c as u32);
+                    }
                 }
             }
         }
-        while let Some(Reverse((_, f, c))) = heap.pop() {
-            let f = f as usize;
-            if next[f] != u32::MAX {
+        while let Some(Reverse((_, i, c))) = heap.pop() {
+            let i = i as usize;
+            if next[i] != u32::MAX {
                 continue;
             }
-            next[f] = c;
-            for g in neighbors(topo, f) {
-                if next[g] == u32::MAX {
-                    offer(&mut heap, g, c);
+            next[i] = c;
+            for &j in &adjacent[i] {
+                if j != u32::MAX && next[j as usize] == u32::MAX {
+                    offer(&mut heap, j, c);
                 }
             }
         }
@@ -234,11 +241,9 @@ pub fn relax_subset<M: Metric>(
         // seed. Faces of a component without a seed (not possible for a valid partition) keep
         // their label.
         let mut changed = false;
-        for &f in &members {
-            if next[f] == u32::MAX {
-                next[f] = labels[f];
-            } else if next[f] != labels[f] {
-                labels[f] = next[f];
+        for (i, &f) in members.iter().enumerate() {
+            if next[i] != u32::MAX && next[i] != labels[f] {
+                labels[f] = next[i];
                 changed = true;
             }
         }
@@ -316,10 +321,8 @@ pub fn halve<M: Metric>(
         return false;
     }
     let dir = [vecs[0][k], vecs[1][k], vecs[2][k]];
-    let mut movable = vec![false; labels.len()];
     let mut n_new = 0;
     for &f in &members {
-        movable[f] = true;
         let d = sub(key(f), mean);
         if d[0] * dir[0] + d[1] * dir[1] + d[2] * dir[2] > 0.0 {
             labels[f] = new_label;
@@ -332,9 +335,54 @@ pub fn halve<M: Metric>(
         }
         return false;
     }
-    relax_subset(topo, metric, labels, &movable, rounds);
+    relax_subset(topo, metric, labels, &members, rounds);
     let kept = members.iter().filter(|&&f| labels[f] == c).count();
     kept > 0 && kept < members.len()
+}
+
+/// VSA's incremental insertion: while fewer than `k` regions, the region of largest error
+/// under `metric` is halved ([`halve`] across its main direction, `rounds` rounds) where
+/// `worth(labels, region, new)` says the halving adds something; a region that cannot be
+/// halved so is passed over. Returns the region count reached.
+///
+/// Why: the corner merges leave most partitions below K (a region swallowed where its planes
+/// could not meet), and a region the budget could still split is error left on the table.
+pub fn fill<M: Metric>(
+    topo: &Topology,
+    metric: &M,
+    labels: &mut [u32],
+    mut n: usize,
+    k: usize,
+    rounds: usize,
+    worth: impl Fn(&[u32], u32, u32) -> bool,
+) -> usize {
+    let all: Vec<usize> = (0..labels.len()).collect();
+    let mut stuck = vec![false; n];
+    while n < k {
+        let proxy = metric.proxies(labels, &all, n);
+        let mut err = vec![0.0; n];
+        for &f in &all {
+            let c = labels[f] as usize;
+            err[c] += metric.err(f, &proxy[c]);
+        }
+        let Some(worst) = (0..n)
+            .filter(|&r| !stuck[r] && err[r] > 0.0)
+            .max_by(|&a, &b| err[a].total_cmp(&err[b]))
+        else {
+            break;
+        };
+        let (c, new) = (worst as u32, n as u32);
+        if halve(topo, metric, labels, c, new, rounds, 0) && worth(labels, c, new) {
+            n += 1;
+            stuck.push(false);
+        } else {
+            for l in labels.iter_mut().filter(|l| **l == new) {
+                *l = c;
+            }
+            stuck[worst] = true;
+        }
+    }
+    n
 }
 
 #[cfg(test)]
@@ -457,6 +505,31 @@ mod tests {
         let rising = labels[0];
         for (f, &l) in labels.iter().enumerate() {
             assert_eq!(l == rising, f < 2 * r, "face {f}: {labels:?}");
+        }
+    }
+
+    /// One region over a roof, filled to two: the halving cuts at the ridge; where the
+    /// halving is not worth a region, the partition is left as it was.
+    #[test]
+    fn fill_halves_a_roof_at_its_ridge_where_the_halving_is_worth_it() {
+        let n = 8;
+        let (_, topo, normals, areas) = roof(n);
+        let metric = Normals {
+            normals: &normals,
+            areas: &areas,
+        };
+        let mut labels = vec![0u32; 2 * n];
+        assert_eq!(
+            fill(&topo, &metric, &mut labels, 1, 2, 10, |_, _, _| false),
+            1
+        );
+        assert!(labels.iter().all(|&l| l == 0));
+        assert_eq!(
+            fill(&topo, &metric, &mut labels, 1, 2, 10, |_, _, _| true),
+            2
+        );
+        for (f, &l) in labels.iter().enumerate() {
+            assert_eq!(l == labels[0], f < n, "face {f}: {labels:?}");
         }
     }
 

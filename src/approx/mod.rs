@@ -27,7 +27,8 @@
 //!    again and the planes refitted (stage 5 again) — kept only if valid and nearer.
 //!
 //! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the valid polygon mesh
-//! nearest the input is kept. If it has fewer than K regions, the budget left goes to halvings
+//! nearest the input is kept. Its partition filled to K as VSA fills one ([`lloyd::fill`]) is
+//! realised too, kept if nearer. If it has fewer than K regions, the budget left goes to halvings
 //! of its regions into the two planes that fit each best ([`outline::spend_on_two_planes`]),
 //! then stages 5–6 again, kept if nearer. If no draw is realised, the tries are made again
 //! with each region on the principal plane its faces face ([`geom::PlaneRule::Facing`]: a thin
@@ -464,9 +465,8 @@ fn best_on(
     // ended below K regions (merges the budget could not win back: a cascade), the merges-
     // alone realisation is made here, in the draw — which draw ends nearest is only known
     // once both are realised. (One with all K regions is realised so only if kept.)
-    let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
+    let realised = |seed: u64, part: Partitioned, progress: &mut dyn FnMut(Stage)| {
         let sub = with_seed(seed);
-        let part = partition(mesh, surface, &sub, smoothed, progress);
         let (out, made) = match realise(mesh, surface, &sub, smoothed, &part, true, progress) {
             Err(ApproxError::Unrealisable(_)) => (
                 realise(mesh, surface, &sub, smoothed, &part, false, progress),
@@ -478,6 +478,10 @@ fn best_on(
             out => (out, 1),
         };
         (out.map(|o| (o, part)), made)
+    };
+    let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
+        let part = partition(mesh, surface, &with_seed(seed), smoothed, progress);
+        realised(seed, part, progress)
     };
     let tries = opts.tries.max(1);
     // The draws are independent (each only reads the smoothed surface): two at a time on two
@@ -533,6 +537,26 @@ fn best_on(
             b
         };
         best = Some((b, part));
+    }
+    // The kept draw's partition with the budget its corner merges left spent ([`filled`]),
+    // realised too and kept if nearer: made on the kept draw only, as a further candidate —
+    // it replaces no draw, so no run ends farther from the input for it.
+    if let Some((b, part)) = best.take() {
+        let seed = b.report.seed_used;
+        best = Some(
+            match filled(mesh, surface, &with_seed(seed), smoothed, &part) {
+                None => (b, part),
+                Some(fp) => {
+                    let (out, made) = realised(seed, fp, progress);
+                    *runs += made;
+                    match out {
+                        Ok(o) if key(&o.0) < key(&b) => o,
+                        Ok(_) | Err(ApproxError::Unrealisable(_)) => (b, part),
+                        Err(e) => return Err(e),
+                    }
+                }
+            },
+        );
     }
     // Unrealisable: the last draw's defect (the caller says which draws failed).
     let Some((mut best, part)) = best else {
@@ -681,8 +705,66 @@ fn partition(
         64,
         surface.rule,
     );
-    let collapse_merges = cluster::merge_collapsing_regions(topo, &mut labels, n0, a0);
-    let reassigned = cluster::fix_collapsing_faces(topo, &mesh.faces, &mut labels);
+    let facts = PartitionFacts {
+        grown: cl.grown,
+        merged: cl.count,
+        final_angle_deg: cl.final_angle_deg,
+        lloyd_rounds,
+        faces_reassigned: boundary_moves,
+        corner_merges,
+        crease_edges: sm.crease_edges,
+        alm_rounds_normals: sm.rounds,
+    };
+    settle(mesh, surface, smoothed, labels, facts, t)
+}
+
+/// `part` with the budget its corner merges left spent as VSA spends it (its incremental
+/// insertion, [`lloyd::fill`]: the region of largest L2,1 error halved until K regions),
+/// relaxed and settled as [`partition`] settles its own; `None` when nothing could be added.
+///
+/// Why: a region the corner merges made may be realisable as two once its planes are fitted
+/// anew; whether it is, only the realisation tells — so this is a further candidate, kept
+/// only if its realisation ends nearer the input.
+fn filled(
+    mesh: &TriMesh,
+    surface: &outline::Surface<'_>,
+    opts: &ApproxOptions,
+    smoothed: &Smoothed,
+    part: &Partitioned,
+) -> Option<Partitioned> {
+    let t = Instant::now();
+    let (topo, sm, a1) = (surface.topo, &smoothed.sm, &smoothed.a1);
+    let metric = lloyd::Normals {
+        normals: &sm.normals,
+        areas: a1,
+    };
+    let mut labels = part.labels.clone();
+    let worth = |labels: &[u32], c, new| surface.adds_a_plane(labels, c, new);
+    if lloyd::fill(topo, &metric, &mut labels, part.n, opts.k, 10, worth) == part.n {
+        return None;
+    }
+    let mut facts = part.facts.clone();
+    facts.lloyd_rounds += lloyd::relax(topo, &sm.normals, a1, &mut labels, opts.lloyd_rounds);
+    let mut filled = settle(mesh, surface, smoothed, labels, facts, t);
+    filled.seconds += part.seconds;
+    Some(filled)
+}
+
+/// The last steps of a partition: regions and faces that would collapse onto a line merged
+/// or moved, labels renumbered, the planes fitted and the error measured.
+fn settle(
+    mesh: &TriMesh,
+    surface: &outline::Surface<'_>,
+    smoothed: &Smoothed,
+    mut labels: Vec<u32>,
+    mut facts: PartitionFacts,
+    t: Instant,
+) -> Partitioned {
+    let (n0, a0) = (&smoothed.n0, &smoothed.a0);
+    let topo = surface.topo;
+    let diag = geom::bbox_diagonal(mesh);
+    facts.corner_merges += cluster::merge_collapsing_regions(topo, &mut labels, n0, a0);
+    facts.faces_reassigned += cluster::fix_collapsing_faces(topo, &mesh.faces, &mut labels);
     let n = renumber(&mut labels);
     let at = cluster::vertex_clusters(topo, &labels);
     let planes = l1_planes(
@@ -697,16 +779,7 @@ fn partition(
         labels,
         n,
         error,
-        facts: PartitionFacts {
-            grown: cl.grown,
-            merged: cl.count,
-            final_angle_deg: cl.final_angle_deg,
-            lloyd_rounds,
-            faces_reassigned: reassigned + boundary_moves,
-            corner_merges: corner_merges + collapse_merges,
-            crease_edges: sm.crease_edges,
-            alm_rounds_normals: sm.rounds,
-        },
+        facts,
         seconds: t.elapsed().as_secs_f64(),
     }
 }
@@ -1076,6 +1149,7 @@ fn finish(
 }
 
 /// What the partition stage did, for the report.
+#[derive(Clone)]
 struct PartitionFacts {
     grown: usize,
     merged: usize,

@@ -316,11 +316,17 @@ fn place(j: Junction, planes: &[Plane], x: V3) -> Option<V3> {
 fn region_sizes(face_box: &[[V3; 2]], labels: &[u32], n: usize) -> Vec<f64> {
     let mut lo = vec![[f64::INFINITY; 3]; n];
     let mut hi = vec![[f64::NEG_INFINITY; 3]; n];
+    // Comparisons rather than `f64::min`/`max` (whose NaN handling costs a branch per call):
+    // the boxes are finite, and this pass over every face runs once per build.
     for (b, &r) in face_box.iter().zip(labels) {
         let r = r as usize;
         for k in 0..3 {
-            lo[r][k] = lo[r][k].min(b[0][k]);
-            hi[r][k] = hi[r][k].max(b[1][k]);
+            if b[0][k] < lo[r][k] {
+                lo[r][k] = b[0][k];
+            }
+            if b[1][k] > hi[r][k] {
+                hi[r][k] = b[1][k];
+            }
         }
     }
     (0..n)
@@ -705,7 +711,7 @@ pub fn build(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Built,
         mesh.polygons.push(poly);
         mesh.region.push(r);
     }
-    if let Some([a, b]) = first_crossing(&mesh.positions, &tris, &tri_region) {
+    if let Some([a, b]) = first_crossing(&mesh.positions, &tris, &tri_region, s.tol) {
         return Err(Defect::Crossing { regions: [a, b] });
     }
     mesh.corners = cs.vertex;
@@ -1146,6 +1152,25 @@ impl<'a> Surface<'a> {
         )
     }
 
+    /// Whether regions `a` and `b` of `labels` (a region just halved) fit two planes better
+    /// than one by more than the output's precision: their squared distance to their planes
+    /// is lower than the union's to its plane by more than the tolerance squared over the
+    /// area. Else the two planes are one at that precision (a flat region halved), and the
+    /// corners where they meet a third plane are ill-conditioned.
+    pub fn adds_a_plane(&self, labels: &[u32], a: u32, b: u32) -> bool {
+        let mut halves = [Moments::default(); 2];
+        for (f, &l) in labels.iter().enumerate() {
+            if l == a || l == b {
+                let h = &mut halves[usize::from(l == b)];
+                *h = h.add(&self.moments[f]);
+            }
+        }
+        let whole = halves[0].add(&halves[1]);
+        let residual = |m: &Moments| m.fit(self.rule).map_or(0.0, |(_, r)| r);
+        residual(&whole) - residual(&halves[0]) - residual(&halves[1])
+            > self.tol * self.tol * whole.area()
+    }
+
     /// VSA's L2,1 metric on the input's faces (what the realisation's splits follow).
     fn normals_metric(&self) -> super::lloyd::Normals<'_> {
         super::lloyd::Normals {
@@ -1572,6 +1597,23 @@ mod tests {
         let (m, t, sides) = crate::approx::testing::cube(3);
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
         test(&Surface::new(&t, &m, &normals, &areas), &sides);
+    }
+
+    /// A side of the cube cut in two adds no plane (both halves lie on the side's plane); two
+    /// sides that meet at an edge, as the halves of one region, do.
+    #[test]
+    fn a_flat_region_halved_adds_no_plane_and_a_bent_one_does() {
+        on_cube(|s, sides| {
+            let mut labels = sides.to_vec();
+            for (f, l) in labels.iter_mut().enumerate() {
+                if *l == 0 && f % 2 == 0 {
+                    *l = 6;
+                }
+            }
+            assert!(labels.contains(&6) && labels.contains(&0));
+            assert!(!s.adds_a_plane(&labels, 0, 6));
+            assert!(s.adds_a_plane(sides, 0, 1));
+        });
     }
 
     /// The cube with two sides that meet at an edge (x = 0 and y = 0) merged into one region,
