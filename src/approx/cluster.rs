@@ -43,14 +43,6 @@ pub struct Clustering {
     pub final_angle_deg: f64,
 }
 
-fn face_neighbors(topo: &Topology, f: usize) -> impl Iterator<Item = usize> + '_ {
-    topo.face_edges[f].iter().filter_map(move |&e| {
-        let [a, b] = topo.edge_faces[e as usize];
-        let g = if a as usize == f { b } else { a };
-        (g != NO_FACE).then_some(g as usize)
-    })
-}
-
 /// Region growing then merging; `normals` unit per face, `areas` per face.
 pub fn cluster_faces(
     topo: &Topology,
@@ -81,7 +73,7 @@ pub fn cluster_faces(
         let mut a = areas[s];
         queue.push_back(s);
         while let Some(f) = queue.pop_front() {
-            for g in face_neighbors(topo, f) {
+            for g in super::lloyd::neighbors(topo, f) {
                 if label[g] != u32::MAX {
                     continue;
                 }
@@ -493,7 +485,7 @@ pub fn merge_unreachable_corners(
             // Edge-adjacent region pairs around v.
             let mut best: Option<(f64, u32, u32)> = None;
             for &f in topo.vertex_faces(v as u32) {
-                for g in face_neighbors(topo, f as usize) {
+                for g in super::lloyd::neighbors(topo, f as usize) {
                     let (a, b) = (face_cluster[f as usize], face_cluster[g]);
                     if a == b || !faces[g].contains(&(v as u32)) {
                         continue;
@@ -574,7 +566,9 @@ pub fn smooth_boundaries(topo: &Topology, face_cluster: &mut [u32], max_passes: 
         let mut changed = false;
         for f in 0..face_cluster.len() {
             let own = face_cluster[f];
-            let nb: Vec<u32> = face_neighbors(topo, f).map(|g| face_cluster[g]).collect();
+            let nb: Vec<u32> = super::lloyd::neighbors(topo, f)
+                .map(|g| face_cluster[g])
+                .collect();
             let other = nb
                 .iter()
                 .copied()

@@ -29,11 +29,9 @@ use crate::mesh::{Topology, NO_FACE};
 
 /// Edge-neighbour faces of `f`.
 pub(super) fn neighbors(topo: &Topology, f: usize) -> impl Iterator<Item = usize> + '_ {
-    topo.face_edges[f].iter().filter_map(move |&e| {
-        let [a, b] = topo.edge_faces[e as usize];
-        let g = if a as usize == f { b } else { a };
-        (g != NO_FACE).then_some(g as usize)
-    })
+    topo.face_faces[f]
+        .iter()
+        .filter_map(|&g| (g != NO_FACE).then_some(g as usize))
 }
 
 /// What a Lloyd round fits to each region (its proxy) and how far a face is from a proxy.

@@ -1019,25 +1019,21 @@ fn hand_out(
     let mut label: HashMap<usize, u32> = std::collections::HashMap::new();
     let mut heap: BinaryHeap<Reverse<(u64, usize, u32)>> = BinaryHeap::new();
     let push_from = |f: usize, label: &HashMap<usize, u32>, heap: &mut BinaryHeap<_>| {
-        for &e in &topo.face_edges[f] {
-            let ef = topo.edge_faces[e as usize];
-            let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
-            if g == NO_FACE || fc[g as usize] != r || label.contains_key(&(g as usize)) {
+        for g in super::lloyd::neighbors(topo, f) {
+            if fc[g] != r || label.contains_key(&g) {
                 continue;
             }
             let c = if fc[f] == r { label[&f] } else { fc[f] };
-            if let Some(k) = cost(g as usize, c) {
+            if let Some(k) = cost(g, c) {
                 // Non-negative floats order as their bits do.
-                heap.push(Reverse((k.max(0.0).to_bits(), g as usize, c)));
+                heap.push(Reverse((k.max(0.0).to_bits(), g, c)));
             }
         }
     };
     for &f in members {
-        for &e in &topo.face_edges[f] {
-            let ef = topo.edge_faces[e as usize];
-            let g = if ef[0] as usize == f { ef[1] } else { ef[0] };
-            if g != NO_FACE && fc[g as usize] != r {
-                push_from(g as usize, &label, &mut heap);
+        for g in super::lloyd::neighbors(topo, f) {
+            if fc[g] != r {
+                push_from(g, &label, &mut heap);
             }
         }
     }

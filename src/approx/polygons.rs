@@ -96,11 +96,8 @@ pub(super) fn region_loops(
 ) -> Vec<Vec<Vec<u32>>> {
     // The boundary half-edges (region, from, to) in face order.
     let mut half: Vec<(u32, u32, u32)> = Vec::new();
-    for (f, face) in faces.iter().enumerate() {
-        for k in 0..3 {
-            let e = topo.face_edges[f][k] as usize;
-            let [g0, g1] = topo.edge_faces[e];
-            let g = if g0 as usize == f { g1 } else { g0 };
+    for ((f, face), across) in faces.iter().enumerate().zip(&topo.face_faces) {
+        for (k, &g) in across.iter().enumerate() {
             if g == NO_FACE || fc[g as usize] != fc[f] {
                 half.push((fc[f], face[k], face[(k + 1) % 3]));
             }

@@ -32,6 +32,9 @@ pub struct Topology {
     pub edge_faces: Vec<[u32; 2]>,
     /// (#F) edge index of side `k` of face `f`, the side from `f[k]` to `f[(k+1)%3]`.
     pub face_edges: Vec<[u32; 3]>,
+    /// (#F) the face across side `k` of face `f` (`NO_FACE` on the boundary): face adjacency
+    /// without an edge lookup per step, for floods and scans over faces.
+    pub face_faces: Vec<[u32; 3]>,
     /// Edges with two faces, ascending.
     pub interior_edges: Vec<u32>,
     /// Edges with one face, ascending.
@@ -119,6 +122,20 @@ impl Topology {
             directed_side(mesh, &face_edges, f0, e) != directed_side(mesh, &face_edges, f1, e)
         });
 
+        let face_faces = face_edges
+            .iter()
+            .enumerate()
+            .map(|(f, sides)| {
+                sides.map(|e| {
+                    let [g0, g1] = edge_faces[e as usize];
+                    if g0 as usize == f {
+                        g1
+                    } else {
+                        g0
+                    }
+                })
+            })
+            .collect();
         let mut topo = Topology {
             n_vertices: n,
             vf_offsets,
@@ -129,6 +146,7 @@ impl Topology {
             edges,
             edge_faces,
             face_edges,
+            face_faces,
             interior_edges,
             boundary_edges,
             boundary_loops: Vec::new(),
