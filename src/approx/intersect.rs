@@ -65,8 +65,7 @@ fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
             && orient(p(y), p(z), p(w)) * orient(p(y), p(z), p(x)) < 0.0
     };
     let inside = |i: u32, t: [u32; 3]| {
-        let o = edges(t).map(|(x, y)| orient(p(x), p(y), p(i)));
-        let o: Vec<f64> = o.collect();
+        let o = [0, 1, 2].map(|k| orient(p(t[k]), p(t[(k + 1) % 3]), p(i)));
         o.iter().all(|&x| x > 0.0) || o.iter().all(|&x| x < 0.0)
     };
     edges(a).any(|e| edges(b).any(|f| proper(e, f)))

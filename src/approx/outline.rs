@@ -820,13 +820,13 @@ impl Fits {
         self.of(&merged).1 - self.fit[a as usize].1 - self.fit[b as usize].1
     }
 
-    /// The adjacent pair among `pairs` whose merge costs least.
+    /// The adjacent pair among `pairs` whose merge costs least (each cost a plane fit,
+    /// computed once per pair).
     fn cheapest(&self, pairs: impl Iterator<Item = (u32, u32)>) -> Option<(u32, u32)> {
-        pairs.min_by(|&x, &y| {
-            self.merge_cost(x)
-                .total_cmp(&self.merge_cost(y))
-                .then(x.cmp(&y))
-        })
+        pairs
+            .map(|p| (self.merge_cost(p), p))
+            .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
+            .map(|(_, p)| p)
     }
 }
 
