@@ -3,6 +3,7 @@
 //! only meet where their corners or edges say, unless their planes cut through each other).
 
 use super::geom::{cross, dot, sub, V3};
+use super::polygons::{orient, segments_cross};
 
 /// Six times the signed volume of `a b c d`.
 fn orient3(a: V3, b: V3, c: V3, d: V3) -> f64 {
@@ -43,9 +44,6 @@ fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
         .unwrap_or(2);
     let (u, v) = ((m + 1) % 3, (m + 2) % 3);
     let p = |i: u32| [pos[i as usize][u], pos[i as usize][v]];
-    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
-        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-    };
     let shared: Vec<u32> = a.iter().copied().filter(|x| b.contains(x)).collect();
     if shared.len() == 3 {
         return true;
@@ -59,10 +57,7 @@ fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
     }
     let edges = |t: [u32; 3]| (0..3).map(move |k| (t[k], t[(k + 1) % 3]));
     let proper = |(w, x): (u32, u32), (y, z): (u32, u32)| {
-        ![y, z].contains(&w)
-            && ![y, z].contains(&x)
-            && orient(p(w), p(x), p(y)) * orient(p(w), p(x), p(z)) < 0.0
-            && orient(p(y), p(z), p(w)) * orient(p(y), p(z), p(x)) < 0.0
+        ![y, z].contains(&w) && ![y, z].contains(&x) && segments_cross(p(w), p(x), p(y), p(z))
     };
     let inside = |i: u32, t: [u32; 3]| {
         let o = [0, 1, 2].map(|k| orient(p(t[k]), p(t[(k + 1) % 3]), p(i)));

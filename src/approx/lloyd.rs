@@ -154,6 +154,10 @@ pub fn relax_subset<M: Metric>(
     members: &[usize],
     rounds: usize,
 ) -> usize {
+    debug_assert!(
+        members.windows(2).all(|w| w[0] < w[1]),
+        "members must ascend"
+    );
     let count = members
         .iter()
         .map(|&f| labels[f] as usize + 1)
