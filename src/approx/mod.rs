@@ -419,6 +419,38 @@ fn best_run(
     })
 }
 
+/// What one draw gives: its realisation and partition (or why it has none), and the
+/// realisations it made.
+type Drawn = (Result<(Run, Partitioned), ApproxError>, usize);
+
+/// `job(j)` for every `j` of `js` on two threads, each taking the next `j` when free (jobs
+/// differ in cost); the results in the order of `js`.
+fn two_at_a_time<T: Send>(js: std::ops::Range<usize>, job: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let next = std::sync::atomic::AtomicUsize::new(js.start);
+    let work = || {
+        let mut done = Vec::new();
+        loop {
+            let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if j >= js.end {
+                return done;
+            }
+            done.push((j, job(j)));
+        }
+    };
+    let mut all = std::thread::scope(|scope| {
+        let other = scope.spawn(work);
+        let mut all = work();
+        all.extend(
+            other
+                .join()
+                .unwrap_or_else(|e| std::panic::resume_unwind(e)),
+        );
+        all
+    });
+    all.sort_by_key(|&(j, _)| j);
+    all.into_iter().map(|(_, t)| t).collect()
+}
+
 /// The draws of [`best_run`] on `surface` (its plane rule), seeds `opts.seed ..= opts.seed +
 /// last` at most, the nearest valid one kept and finished; `runs` counts the realisations
 /// made, `t` is when the whole run started.
@@ -451,29 +483,56 @@ fn best_on(
     };
     // Giving a region away stops the cascade of merges that a region whose outline crosses
     // itself starts, but it can start one of its own: `o`'s partition realised with merges
-    // alone too, and the mesh nearer the input kept.
-    let nearer_with_merges_alone = |o: Run, part: &Partitioned, progress: &mut dyn FnMut(Stage)| {
-        let sub = with_seed(o.report.seed_used);
-        match realise(mesh, surface, &sub, smoothed, part, false, progress) {
-            Ok(m) if key(&m) < key(&o) => Ok(m),
-            Ok(_) | Err(ApproxError::Unrealisable(_)) => Ok(o),
-            Err(e) => Err(e),
-        }
+    // alone too (`alone`), and the mesh nearer the input kept.
+    let alone = |seed: u64, part: &Partitioned, progress: &mut dyn FnMut(Stage)| {
+        realise(
+            mesh,
+            surface,
+            &with_seed(seed),
+            smoothed,
+            part,
+            false,
+            progress,
+        )
+    };
+    let nearer = |o: Run, alone: Result<Run, ApproxError>| match alone {
+        Ok(m) if key(&m) < key(&o) => Ok(m),
+        Ok(_) | Err(ApproxError::Unrealisable(_)) => Ok(o),
+        Err(e) => Err(e),
     };
     // One seed: its partition, realised giving regions away, or with merges alone where
     // that realises nothing; with the realisations made. Where it gave a region away and
     // ended below K regions (merges the budget could not win back: a cascade), the merges-
     // alone realisation is made here, in the draw — which draw ends nearest is only known
-    // once both are realised. (One with all K regions is realised so only if kept.)
-    let realised = |seed: u64, part: Partitioned, progress: &mut dyn FnMut(Stage)| {
+    // once both are realised. (One with all K regions is realised so only if kept.) With a
+    // core to `spare`, the merges-alone realisation is made beside the other in any case
+    // (counted only where used: it changes no result, only when it is ready).
+    let realised = |seed: u64, part: Partitioned, spare: bool, progress: &mut dyn FnMut(Stage)| {
         let sub = with_seed(seed);
-        let (out, made) = match realise(mesh, surface, &sub, smoothed, &part, true, progress) {
-            Err(ApproxError::Unrealisable(_)) => (
-                realise(mesh, surface, &sub, smoothed, &part, false, progress),
-                2,
-            ),
+        let give_away = |progress: &mut dyn FnMut(Stage)| {
+            realise(mesh, surface, &sub, smoothed, &part, true, progress)
+        };
+        let (first, mut beside) = if spare {
+            std::thread::scope(|scope| {
+                let h = scope.spawn(|| alone(seed, &part, &mut |_| {}));
+                let first = give_away(&mut |_| {});
+                (
+                    first,
+                    Some(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
+                )
+            })
+        } else {
+            (give_away(progress), None)
+        };
+        let mut second = |progress: &mut dyn FnMut(Stage)| {
+            beside
+                .take()
+                .unwrap_or_else(|| alone(seed, &part, progress))
+        };
+        let (out, made) = match first {
+            Err(ApproxError::Unrealisable(_)) => (second(progress), 2),
             Ok(o) if o.report.regions_dissolved > 0 && o.report.k_obtained < sub.k => {
-                (nearer_with_merges_alone(o, &part, progress), 2)
+                (nearer(o, second(progress)), 2)
             }
             out => (out, 1),
         };
@@ -481,82 +540,135 @@ fn best_on(
     };
     let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
         let part = partition(mesh, surface, &with_seed(seed), smoothed, progress);
-        realised(seed, part, progress)
+        realised(seed, part, false, progress)
+    };
+    // Two further candidates on the kept draw `(b, part)`, independent of each other (each
+    // reads only the kept draw's partition), so made on two threads; the nearest of the three
+    // is returned with the realisations made:
+    // - if it gave regions away with all K regions left, its partition realised with merges
+    //   alone too;
+    // - its partition with the budget its corner merges left spent ([`filled`]), realised:
+    //   made on the kept draw only, as a further candidate — it replaces no draw, so no run
+    //   ends farther from the input for it.
+    let tail = |b: Run, part: Partitioned| -> Result<(Run, Partitioned, usize), ApproxError> {
+        let seed = b.report.seed_used;
+        let fill = |spare: bool| {
+            filled(mesh, surface, &with_seed(seed), smoothed, &part)
+                .map(|fp| realised(seed, fp, spare, &mut |_| {}))
+        };
+        let (b, fill, mut made) = if b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k
+        {
+            std::thread::scope(|scope| {
+                let h = scope.spawn(|| fill(false));
+                let b = nearer(b, alone(seed, &part, &mut |_| {}));
+                (
+                    b,
+                    h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)),
+                    1,
+                )
+            })
+        } else {
+            (Ok(b), fill(true), 0)
+        };
+        let b = b?;
+        let Some((out, fill_made)) = fill else {
+            return Ok((b, part, made));
+        };
+        made += fill_made;
+        match out {
+            Ok((o, fp)) if key(&o) < key(&b) => Ok((o, fp, made)),
+            Ok(_) | Err(ApproxError::Unrealisable(_)) => Ok((b, part, made)),
+            Err(e) => Err(e),
+        }
     };
     let tries = opts.tries.max(1);
-    // The draws are independent (each only reads the smoothed surface): two at a time on two
-    // threads, always two (not the machine's core count), so the draws made — and the mesh
-    // kept, the nearest of them all — do not depend on the machine. A restart drawn beside
-    // the one that made it unnecessary is kept too: it is made anyway.
-    let mut i = 0;
-    while i <= last {
-        let wave = (last + 1 - i).min(2);
-        let seeds: Vec<u64> = (i..i + wave)
-            .map(|j| opts.seed.wrapping_add(j as u64))
-            .collect();
-        let drawn: Vec<_> = if wave == 1 {
-            vec![draw(seeds[0], progress)]
-        } else {
-            progress(Stage::Cluster);
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = seeds
-                    .iter()
-                    .map(|&seed| scope.spawn(move || draw(seed, &mut |_| {})))
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    .collect()
-            })
-        };
+    // The draws are independent (each only reads the smoothed surface). They are made in
+    // waves of two seeds, always two (not the machine's core count), the search stopping
+    // after a wave once `tries` draws are made and the nearest is `done` — so which draws are
+    // made, and the mesh kept (the nearest of them all), do not depend on the machine; a
+    // restart drawn beside the one that made it unnecessary is kept too: it is made anyway.
+    // The draws before the first wave end that can stop the search are made in any case, and
+    // are run on two threads each taking the next seed when free (draws differ in cost).
+    let certain = (2 * tries.div_ceil(2)).min(last + 1);
+    // Each draw kept if nearest so far, in seed order (ties go to the earlier seed); whether
+    // one was.
+    let absorb = |best: &mut Option<(Run, Partitioned)>,
+                  unrealised: &mut Option<ApproxError>,
+                  drawn: Vec<Drawn>,
+                  runs: &mut usize|
+     -> Result<bool, ApproxError> {
+        let mut replaced = false;
         for (out, made) in drawn {
-            i += 1;
             *runs += made;
             match out {
                 Ok((out, part)) => {
                     if best.as_ref().is_none_or(|b| key(&out) < key(&b.0)) {
-                        best = Some((out, part));
+                        *best = Some((out, part));
+                        replaced = true;
                     }
                 }
                 // Another seed's partition may be realisable.
-                Err(e @ ApproxError::Unrealisable(_)) => unrealised = Some(e),
+                Err(e @ ApproxError::Unrealisable(_)) => *unrealised = Some(e),
                 Err(e) => return Err(e),
             }
         }
-        if i >= tries && best.as_ref().is_some_and(|b| done(&b.0)) {
-            break;
-        }
-    }
-    // The kept realisation, if it gave regions away with all K regions left, realised with
-    // merges alone too.
-    if let Some((b, part)) = best.take() {
-        let b = if b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k {
-            *runs += 1;
-            nearer_with_merges_alone(b, &part, progress)?
+        Ok(replaced)
+    };
+    let seed_of = |j: usize| opts.seed.wrapping_add(j as u64);
+    let on_two = |from: usize, to: usize, progress: &mut dyn FnMut(Stage)| {
+        if to - from == 1 {
+            vec![draw(seed_of(from), progress)]
         } else {
-            b
+            progress(Stage::Cluster);
+            two_at_a_time(from..to, |j| draw(seed_of(j), &mut |_| {}))
+        }
+    };
+    absorb(
+        &mut best,
+        &mut unrealised,
+        on_two(0, certain, progress),
+        runs,
+    )?;
+    // Two further candidates on the kept draw (`tail`); when the last wave is one draw, they
+    // are made for the nearest draw so far beside it, and kept unless that draw is nearer.
+    let mut tail_made: Option<Result<(Run, Partitioned, usize), ApproxError>> = None;
+    let mut i = certain;
+    while i <= last && !best.as_ref().is_some_and(|b| done(&b.0)) {
+        let wave = (last + 1 - i).min(2);
+        let replaced = match best.as_ref() {
+            Some((b, part)) if i == last => {
+                let (b, part) = (b.clone(), part.clone());
+                progress(Stage::Cluster);
+                let (d, speculated) = std::thread::scope(|scope| {
+                    let h = scope.spawn(|| tail(b, part));
+                    let d = draw(seed_of(i), &mut |_| {});
+                    (d, h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                });
+                tail_made = Some(speculated);
+                absorb(&mut best, &mut unrealised, vec![d], runs)?
+            }
+            _ => absorb(
+                &mut best,
+                &mut unrealised,
+                on_two(i, i + wave, progress),
+                runs,
+            )?,
         };
-        best = Some((b, part));
+        if replaced {
+            // Made for a draw no longer the nearest: counted, not kept.
+            if let Some(Ok((_, _, made))) = tail_made.take() {
+                *runs += made;
+            }
+        }
+        i += wave;
     }
-    // The kept draw's partition with the budget its corner merges left spent ([`filled`]),
-    // realised too and kept if nearer: made on the kept draw only, as a further candidate —
-    // it replaces no draw, so no run ends farther from the input for it.
     if let Some((b, part)) = best.take() {
-        let seed = b.report.seed_used;
-        best = Some(
-            match filled(mesh, surface, &with_seed(seed), smoothed, &part) {
-                None => (b, part),
-                Some(fp) => {
-                    let (out, made) = realised(seed, fp, progress);
-                    *runs += made;
-                    match out {
-                        Ok(o) if key(&o.0) < key(&b) => o,
-                        Ok(_) | Err(ApproxError::Unrealisable(_)) => (b, part),
-                        Err(e) => return Err(e),
-                    }
-                }
-            },
-        );
+        let (b, part, made) = match tail_made {
+            Some(t) => t?,
+            None => tail(b, part)?,
+        };
+        *runs += made;
+        best = Some((b, part));
     }
     // Unrealisable: the last draw's defect (the caller says which draws failed).
     let Some((mut best, part)) = best else {
@@ -639,6 +751,7 @@ fn smooth(
 }
 
 /// The partition of one seed (`opts.seed`), regions `0..n`, and what the clustering did.
+#[derive(Clone)]
 struct Partitioned {
     labels: Vec<u32>,
     n: usize,
@@ -974,6 +1087,7 @@ fn input_distances(pos: &[V3], regions_at: &[Vec<u32>], planes: &[Plane]) -> (f6
 }
 
 /// A realised partition (stages 4–6) and its report.
+#[derive(Clone)]
 struct Run {
     realised: outline::Realised,
     report: ApproxReport,
