@@ -269,8 +269,29 @@ struct Corners {
     /// Input vertex each corner belongs to, and the regions whose planes place it.
     vertex: Vec<u32>,
     regions: Vec<Vec<u32>>,
-    /// (vertex, region) → that region's corners at the vertex, in outline order.
-    at: HashMap<(u32, u32), Vec<u32>>,
+    /// (vertex, region, first, end): that region's corners at the vertex, in outline order,
+    /// are `at_corners[first..end]`; ascending by vertex (the order they are found in).
+    at: Vec<(u32, u32, u32, u32)>,
+    at_corners: Vec<u32>,
+}
+
+impl Corners {
+    /// Region `r`'s corners at vertex `v`, in outline order.
+    fn at(&self, v: u32, r: u32) -> Option<&[u32]> {
+        let first = self.at.partition_point(|e| e.0 < v);
+        self.at[first..]
+            .iter()
+            .take_while(|e| e.0 == v)
+            .find(|e| e.1 == r)
+            .map(|e| &self.at_corners[e.2 as usize..e.3 as usize])
+    }
+
+    /// Records `r`'s corners at `v` (vertices in ascending order).
+    fn set_at(&mut self, v: u32, r: u32, corners: impl IntoIterator<Item = u32>) {
+        let first = self.at_corners.len() as u32;
+        self.at_corners.extend(corners);
+        self.at.push((v, r, first, self.at_corners.len() as u32));
+    }
 }
 
 /// Where the planes of `j` meet, nearest to `x`.
@@ -346,9 +367,14 @@ fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners,
         positions: Vec::new(),
         vertex: Vec::new(),
         regions: Vec::new(),
-        at: HashMap::new(),
+        at: Vec::new(),
+        at_corners: Vec::new(),
     };
     let mut triples: HashMap<[u32; 3], u32> = HashMap::new();
+    // Per-vertex lists, kept to reuse their memory (most vertices where regions meet are
+    // visited on every build).
+    let (mut seq, mut sorted, mut cycle, mut ids, mut cs) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for v in 0..s.topo.n_vertices as u32 {
         let (fs, border) = s.star(v);
         // Inside a region (most vertices): no corner.
@@ -361,7 +387,7 @@ fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners,
             continue;
         }
         // Regions in counter-clockwise order, runs collapsed.
-        let mut seq: Vec<u32> = Vec::new();
+        seq.clear();
         for &f in fs {
             let r = labels[f as usize];
             if seq.last() != Some(&r) {
@@ -377,7 +403,8 @@ fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners,
                 region: seq[0],
                 regions: Vec::new(),
             })?;
-            out.at.insert((v, seq[0]), vec![out.positions.len() as u32]);
+            let c_id = out.positions.len() as u32;
+            out.set_at(v, seq[0], [c_id]);
             out.positions.push(c);
             out.vertex.push(v);
             out.regions.push(vec![seq[0]]);
@@ -386,7 +413,7 @@ fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners,
         if !border && seq.len() < 3 {
             continue;
         }
-        let mut sorted = seq.clone();
+        sorted.clone_from(&seq);
         sorted.sort_unstable();
         sorted.dedup();
         if sorted.len() < seq.len() {
@@ -398,15 +425,15 @@ fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners,
             return Err(Defect::Pinch {
                 vertex: v,
                 twice,
-                regions: sorted,
+                regions: sorted.clone(),
             });
         }
         // The cycle of the fan: the border's outside first, else the root that keeps the
         // corners nearest to the vertex.
-        let cycle: Vec<u32> = if border {
-            std::iter::once(OUTSIDE)
-                .chain(seq.iter().copied())
-                .collect()
+        cycle.clear();
+        if border {
+            cycle.push(OUTSIDE);
+            cycle.extend_from_slice(&seq);
         } else {
             let m = seq.len();
             let spread = |root: usize| -> f64 {
@@ -427,12 +454,12 @@ fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners,
             let root = (0..m)
                 .min_by(|&a, &b| spread(a).total_cmp(&spread(b)))
                 .unwrap_or(0);
-            (0..m).map(|t| seq[(root + t) % m]).collect()
-        };
+            cycle.extend((0..m).map(|t| seq[(root + t) % m]));
+        }
         let m = cycle.len();
         let first = out.positions.len();
         // The corner of each fan triangle t = 1..m−1: (cycle[0], cycle[t], cycle[t + 1]).
-        let mut ids: Vec<u32> = Vec::new();
+        ids.clear();
         for t in 1..m - 1 {
             let regions = [cycle[0], cycle[t], cycle[t + 1]];
             let named = || regions.iter().copied().filter(|&r| r != OUTSIDE).collect();
@@ -485,17 +512,19 @@ fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners,
             if r == OUTSIDE {
                 continue;
             }
-            let ts: Vec<usize> = if j == 0 {
-                (1..m - 1).collect()
+            cs.clear();
+            if j == 0 {
+                cs.extend_from_slice(&ids);
             } else {
-                [j, j - 1]
-                    .into_iter()
-                    .filter(|&t| t >= 1 && t < m - 1)
-                    .collect()
-            };
-            let mut cs: Vec<u32> = ts.iter().map(|&t| ids[t - 1]).collect();
+                cs.extend(
+                    [j, j - 1]
+                        .into_iter()
+                        .filter(|&t| t >= 1 && t < m - 1)
+                        .map(|t| ids[t - 1]),
+                );
+            }
             cs.dedup();
-            out.at.insert((v, r), cs);
+            out.set_at(v, r, cs.iter().copied());
         }
     }
     Ok(out)
@@ -556,7 +585,7 @@ fn region_outlines(
     for lp in region_loops {
         let mut ol: Vec<u32> = lp
             .iter()
-            .filter_map(|&v| cs.at.get(&(v, r)))
+            .filter_map(|&v| cs.at(v, r))
             .flatten()
             .copied()
             .collect();
