@@ -166,6 +166,23 @@ pub fn cluster_faces(
             })
             .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
     };
+    // Each region's `closest` neighbour within the cone limit, and its cheapest merge above θ
+    // (cost, neighbour, cosine; the first of least cost in its neighbour order), kept until a
+    // merge changes the region or a neighbour (then `None`): both read only the region's and
+    // its neighbours' sums, cones, areas and neighbour sets, which a merge changes for the
+    // merged region and the regions around it alone. Each merge above θ would otherwise
+    // recompute them for every region.
+    let mut near: Vec<Option<Option<(usize, f64)>>> = vec![None; grown];
+    let mut cheap: Vec<Option<Option<(f64, usize, f64)>>> = vec![None; grown];
+    let changed = |into: usize,
+                   adj: &Vec<BTreeSet<u32>>,
+                   near: &mut Vec<Option<Option<(usize, f64)>>>,
+                   cheap: &mut Vec<Option<Option<(f64, usize, f64)>>>| {
+        for c in std::iter::once(into).chain(adj[into].iter().map(|&m| m as usize)) {
+            near[c] = None;
+            cheap[c] = None;
+        }
+    };
     while n_alive > opts.k.max(1) {
         let cos_a = angle.to_radians().cos();
         let mut heap: BinaryHeap<Reverse<(u64, usize)>> = (0..grown)
@@ -180,7 +197,8 @@ pub fn cluster_faces(
             if !alive[c] || k != key(area[c]) {
                 continue;
             }
-            let Some((m, cos)) = closest(c, &adj, &sums, Some(&cone)) else {
+            let found = *near[c].get_or_insert_with(|| closest(c, &adj, &sums, Some(&cone)));
+            let Some((m, cos)) = found else {
                 continue; // isolated, or every merge would widen the cone too much
             };
             if cos < cos_a {
@@ -189,6 +207,7 @@ pub fn cluster_faces(
             merge(
                 c, m, &mut adj, &mut sums, &mut area, &mut alive, &mut open, &mut cone,
             );
+            changed(m, &adj, &mut near, &mut cheap);
             n_alive -= 1;
             merged_any = true;
             heap.push(Reverse((key(area[m]), m)));
@@ -203,15 +222,24 @@ pub fn cluster_faces(
             // once instead lets tiny regions swallow steep neighbours.
             let mut best: Option<(f64, usize, usize, f64)> = None;
             for c in (0..grown).filter(|&c| alive[c]) {
-                let nc = normalize(sums[c]).unwrap_or([0.0; 3]);
-                for &m in &adj[c] {
-                    let m = m as usize;
-                    let cos = dot(nc, normalize(sums[m]).unwrap_or([0.0; 3]));
-                    let wide = merged_cone(sums[c], cone[c], sums[m], cone[m]) > max_cone;
-                    // Any merge within the limit beats every wider one: add a constant
-                    // above every possible cost (a cost is at most 2 × the whole area).
-                    let cost = (1.0 - cos) * area[c].min(area[m])
-                        + if wide { 4.0 * total_area } else { 0.0 };
+                let of_c = *cheap[c].get_or_insert_with(|| {
+                    let nc = normalize(sums[c]).unwrap_or([0.0; 3]);
+                    let mut first: Option<(f64, usize, f64)> = None;
+                    for &m in &adj[c] {
+                        let m = m as usize;
+                        let cos = dot(nc, normalize(sums[m]).unwrap_or([0.0; 3]));
+                        let wide = merged_cone(sums[c], cone[c], sums[m], cone[m]) > max_cone;
+                        // Any merge within the limit beats every wider one: add a constant
+                        // above every possible cost (a cost is at most 2 × the whole area).
+                        let cost = (1.0 - cos) * area[c].min(area[m])
+                            + if wide { 4.0 * total_area } else { 0.0 };
+                        if first.is_none_or(|b| cost < b.0) {
+                            first = Some((cost, m, cos));
+                        }
+                    }
+                    first
+                });
+                if let Some((cost, m, cos)) = of_c {
                     if best.is_none_or(|b| cost < b.0) {
                         best = Some((cost, c, m, cos));
                     }
@@ -224,6 +252,7 @@ pub fn cluster_faces(
             merge(
                 small, big, &mut adj, &mut sums, &mut area, &mut alive, &mut open, &mut cone,
             );
+            changed(big, &adj, &mut near, &mut cheap);
             n_alive -= 1;
             angle = angle.max(cos.clamp(-1.0, 1.0).acos().to_degrees());
         }
