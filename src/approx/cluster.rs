@@ -172,12 +172,14 @@ pub fn cluster_faces(
     // its neighbours' sums, cones, areas and neighbour sets, which a merge changes for the
     // merged region and the regions around it alone. Each merge above θ would otherwise
     // recompute them for every region.
-    let mut near: Vec<Option<Option<(usize, f64)>>> = vec![None; grown];
-    let mut cheap: Vec<Option<Option<(f64, usize, f64)>>> = vec![None; grown];
+    type Closest = Option<(usize, f64)>;
+    type Cheapest = Option<(f64, usize, f64)>;
+    let mut near: Vec<Option<Closest>> = vec![None; grown];
+    let mut cheap: Vec<Option<Cheapest>> = vec![None; grown];
     let changed = |into: usize,
-                   adj: &Vec<BTreeSet<u32>>,
-                   near: &mut Vec<Option<Option<(usize, f64)>>>,
-                   cheap: &mut Vec<Option<Option<(f64, usize, f64)>>>| {
+                   adj: &[BTreeSet<u32>],
+                   near: &mut [Option<Closest>],
+                   cheap: &mut [Option<Cheapest>]| {
         for c in std::iter::once(into).chain(adj[into].iter().map(|&m| m as usize)) {
             near[c] = None;
             cheap[c] = None;
@@ -224,7 +226,7 @@ pub fn cluster_faces(
             for c in (0..grown).filter(|&c| alive[c]) {
                 let of_c = *cheap[c].get_or_insert_with(|| {
                     let nc = normalize(sums[c]).unwrap_or([0.0; 3]);
-                    let mut first: Option<(f64, usize, f64)> = None;
+                    let mut first: Cheapest = None;
                     for &m in &adj[c] {
                         let m = m as usize;
                         let cos = dot(nc, normalize(sums[m]).unwrap_or([0.0; 3]));

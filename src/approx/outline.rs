@@ -360,9 +360,13 @@ fn region_sizes(face_box: &[[V3; 2]], labels: &[u32], n: usize) -> Vec<f64> {
 
 /// The corners of every vertex where regions meet (see the module doc); corners of one
 /// junction closer than `tol` are one.
-fn corners(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Corners, Defect> {
+fn corners(
+    s: &Surface<'_>,
+    labels: &[u32],
+    planes: &[Plane],
+    size: &[f64],
+) -> Result<Corners, Defect> {
     let (pos, tol) = (s.pos, s.tol);
-    let size = region_sizes(&s.face_box, labels, planes.len());
     let mut out = Corners {
         positions: Vec::new(),
         vertex: Vec::new(),
@@ -713,11 +717,22 @@ pub(crate) type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
 /// The polygon mesh of a partition with its planes, and its triangles (in the polygons'
 /// planes); corners index into one shared list.
 pub fn build(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Built, Defect> {
+    let size = region_sizes(&s.face_box, labels, planes.len());
+    build_sized(s, labels, planes, &size)
+}
+
+/// [`build`] with the regions' bounding-box diagonals given (`size`).
+fn build_sized(
+    s: &Surface<'_>,
+    labels: &[u32],
+    planes: &[Plane],
+    size: &[f64],
+) -> Result<Built, Defect> {
     let (topo, faces) = (s.topo, s.faces);
     // Corners closer than the tolerance are one point at the output's precision: at one
     // junction they are merged, at two they are a defect (two corners on one point pinch the
     // polygons between them).
-    let cs = corners(s, labels, planes)?;
+    let cs = corners(s, labels, planes, size)?;
     if let Some(d) = coincident(&cs, s.tol) {
         return Err(d);
     }
@@ -813,32 +828,6 @@ impl Fits {
         fit_or_flat(m, self.rule)
     }
 
-    /// `self` after the faces of region `r` that `labels` gives the label `n` (= the region
-    /// count) became region `n`: only the two regions' moments are summed again (in face
-    /// order, as [`Fits::new`] sums them: the same values).
-    fn with_split(&self, s: &Surface<'_>, labels: &[u32], r: u32, n: usize) -> Fits {
-        let face = &s.moments;
-        let (mut kept, mut moved) = (Moments::default(), Moments::default());
-        for (f, &l) in labels.iter().enumerate() {
-            if l == r {
-                kept = kept.add(&face[f]);
-            } else if l as usize == n {
-                moved = moved.add(&face[f]);
-            }
-        }
-        let mut region = self.region.clone();
-        let mut fit = self.fit.clone();
-        region[r as usize] = kept;
-        fit[r as usize] = self.of(&kept);
-        region.push(moved);
-        fit.push(self.of(&moved));
-        Fits {
-            region,
-            fit,
-            rule: self.rule,
-        }
-    }
-
     fn planes(&self) -> Vec<Plane> {
         self.fit.iter().map(|f| f.0).collect()
     }
@@ -856,6 +845,116 @@ impl Fits {
             .map(|p| (self.merge_cost(p), p))
             .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
             .map(|(_, p)| p)
+    }
+}
+
+/// Each region's moments, plane fit and bounding box under the labels of the last
+/// [`Regions::update`], kept across the builds of one realisation. A region whose faces are
+/// exactly one region's faces of last time keeps that region's values: a split or a merge
+/// changes one or two regions' faces, and the renumbering after a merge moves none. The
+/// others are summed again in face order, as a scan of every region sums them — the same
+/// values, without reading every face's moments and box on every build.
+#[derive(Default)]
+struct Regions {
+    labels: Vec<u32>,
+    moments: Vec<Moments>,
+    fit: Vec<(Plane, f64)>,
+    boxes: Vec<[V3; 2]>,
+}
+
+impl Regions {
+    /// The values of `labels`' regions `0..n`.
+    fn update(&mut self, s: &Surface<'_>, labels: &[u32], n: usize) {
+        // Per old region the one new region all its faces are in, and per new region the one
+        // old region all its faces come from (NONE: no face, MANY: more than one).
+        const NONE: u32 = u32::MAX;
+        const MANY: u32 = u32::MAX - 1;
+        let mut from = vec![NONE; n];
+        if self.labels.len() == labels.len() {
+            let mut to = vec![NONE; self.moments.len()];
+            for (&a, &b) in self.labels.iter().zip(labels) {
+                let t = &mut to[a as usize];
+                *t = if *t == NONE || *t == b { b } else { MANY };
+                let f = &mut from[b as usize];
+                *f = if *f == NONE || *f == a { a } else { MANY };
+            }
+            for (b, f) in from.iter_mut().enumerate() {
+                if *f < MANY && to[*f as usize] != b as u32 {
+                    *f = MANY;
+                }
+            }
+        }
+        let empty = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+        let kept = |b: usize| from[b] < MANY;
+        let mut moments: Vec<Moments> = (0..n)
+            .map(|b| {
+                if kept(b) {
+                    self.moments[from[b] as usize]
+                } else {
+                    Moments::default()
+                }
+            })
+            .collect();
+        let mut boxes: Vec<[V3; 2]> = (0..n)
+            .map(|b| {
+                if kept(b) {
+                    self.boxes[from[b] as usize]
+                } else {
+                    empty
+                }
+            })
+            .collect();
+        if (0..n).any(|b| !kept(b)) {
+            for (f, &r) in labels.iter().enumerate() {
+                let r = r as usize;
+                if kept(r) {
+                    continue;
+                }
+                moments[r] = moments[r].add(&s.moments[f]);
+                let (bx, fb) = (&mut boxes[r], &s.face_box[f]);
+                for k in 0..3 {
+                    if fb[0][k] < bx[0][k] {
+                        bx[0][k] = fb[0][k];
+                    }
+                    if fb[1][k] > bx[1][k] {
+                        bx[1][k] = fb[1][k];
+                    }
+                }
+            }
+        }
+        self.fit = (0..n)
+            .map(|b| {
+                if kept(b) {
+                    self.fit[from[b] as usize]
+                } else {
+                    fit_or_flat(&moments[b], s.rule)
+                }
+            })
+            .collect();
+        self.moments = moments;
+        self.boxes = boxes;
+        self.labels.clear();
+        self.labels.extend_from_slice(labels);
+    }
+
+    /// The regions' fits (as [`Fits::new`] gives them).
+    fn fits(&self, rule: PlaneRule) -> Fits {
+        Fits {
+            region: self.moments.clone(),
+            fit: self.fit.clone(),
+            rule,
+        }
+    }
+
+    /// The regions' bounding-box diagonals.
+    fn sizes(&self) -> Vec<f64> {
+        self.boxes
+            .iter()
+            .map(|[lo, hi]| {
+                let d = sub(*hi, *lo);
+                dot(d, d).sqrt()
+            })
+            .collect()
     }
 }
 
@@ -1266,9 +1365,11 @@ pub fn realise(
     let mut seen = HashSet::new();
     let mut unsplittable: Vec<bool> = vec![false; n];
     let split = |labels: &mut [u32], r: u32, n: usize| s.split(labels, r, n);
+    let mut regions = Regions::default();
     let (mut polygons, mut triangles, mut triangle_region) = loop {
-        let fits = Fits::new(s, &labels, n);
-        let defect = match build(s, &labels, &fits.planes()) {
+        regions.update(s, &labels, n);
+        let fits = regions.fits(s.rule);
+        let defect = match build_sized(s, &labels, &fits.planes(), &regions.sizes()) {
             Ok(x) => break x,
             Err(d) => d,
         };
@@ -1389,14 +1490,30 @@ pub fn realise(
     // it lowers the residual at all.
     let before = n;
     let normals = s.normals_metric();
-    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 0.25, &normals) {
+    if let Some(b) = spend_budget(
+        s,
+        &mut regions,
+        &mut labels,
+        &mut n,
+        k,
+        &mut unsplittable,
+        0.25,
+        &normals,
+    ) {
         (polygons, triangles, triangle_region) = b;
     }
     // Then the boundaries of the given partition that the realisation merged away, where
     // they are realisable now.
     let mut resplit_tried = HashSet::new();
     while n < k {
-        let Some(built) = resplit(s, &start_labels, &mut labels, n, &mut resplit_tried) else {
+        let Some(built) = resplit(
+            s,
+            &mut regions,
+            &start_labels,
+            &mut labels,
+            n,
+            &mut resplit_tried,
+        ) else {
             break;
         };
         (polygons, triangles, triangle_region) = built;
@@ -1404,7 +1521,16 @@ pub fn realise(
     }
     // Regions left alone at a quarter are tried again at any gain.
     let mut unsplittable = vec![false; n];
-    if let Some(b) = spend_budget(s, &mut labels, &mut n, k, &mut unsplittable, 1.0, &normals) {
+    if let Some(b) = spend_budget(
+        s,
+        &mut regions,
+        &mut labels,
+        &mut n,
+        k,
+        &mut unsplittable,
+        1.0,
+        &normals,
+    ) {
         (polygons, triangles, triangle_region) = b;
     }
     splits += n - before;
@@ -1445,7 +1571,17 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
         moments: &s.moments,
         rule: s.rule,
     };
-    if let Some(b) = spend_budget(s, &mut r.labels, &mut n, k, &mut unsplittable, 1.0, &planes) {
+    let mut regions = Regions::default();
+    if let Some(b) = spend_budget(
+        s,
+        &mut regions,
+        &mut r.labels,
+        &mut n,
+        k,
+        &mut unsplittable,
+        1.0,
+        &planes,
+    ) {
         (r.polygons, r.triangles, r.triangle_region) = b;
         r.planes = Fits::new(s, &r.labels, n).planes();
     }
@@ -1467,8 +1603,10 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
 /// sides, BENCHMARKS round 10). With `keep` = 1/4 the budget goes to curvature first; with 1
 /// what is left goes wherever it lowers the error — which is what the error at K planes asks
 /// for, once curvature and the boundaries the merges removed have had theirs.
+#[allow(clippy::too_many_arguments)]
 fn spend_budget<M: super::lloyd::Metric>(
     s: &Surface<'_>,
+    regions: &mut Regions,
     labels: &mut Vec<u32>,
     n: &mut usize,
     k: usize,
@@ -1477,7 +1615,8 @@ fn spend_budget<M: super::lloyd::Metric>(
     metric: &M,
 ) -> Option<Built> {
     let mut last = None;
-    let mut fits = Fits::new(s, labels, *n);
+    regions.update(s, labels, *n);
+    let mut fits = regions.fits(s.rule);
     while *n < k {
         let Some(worst) = (0..*n)
             .filter(|&r| !unsplittable[r] && fits.fit[r].1 > 0.0)
@@ -1499,12 +1638,13 @@ fn spend_budget<M: super::lloyd::Metric>(
             ) {
                 return None;
             }
-            let after = fits.with_split(s, &trial, worst as u32, *n);
+            regions.update(s, &trial, *n + 1);
+            let after = regions.fits(s.rule);
             let kept = after.fit[worst].1 + after.fit[*n].1;
             if kept > keep * was || kept >= was {
                 return None;
             }
-            build(s, &trial, &after.planes())
+            build_sized(s, &trial, &after.planes(), &regions.sizes())
                 .ok()
                 .map(|b| (trial, b, after))
         });
@@ -1536,13 +1676,15 @@ fn spend_budget<M: super::lloyd::Metric>(
 /// realisable in the new surroundings, where the defect that removed them is gone.
 fn resplit(
     s: &Surface<'_>,
+    regions: &mut Regions,
     start: &[u32],
     labels: &mut [u32],
     n: usize,
     tried: &mut HashSet<u64>,
 ) -> Option<Built> {
     let face_moments = &s.moments[..];
-    let fits = Fits::new(s, labels, n);
+    regions.update(s, labels, n);
+    let fits = regions.fits(s.rule);
     // Each connected part of a given region that one region holds, unless it is all of it
     // (whether the rest stays connected is checked when the candidate is tried).
     let pieces = parts(
@@ -1585,8 +1727,9 @@ fn resplit(
         if region_parts(s.topo, &trial, r).len() != 1 {
             continue;
         }
-        let planes = fits.with_split(s, &trial, r, n).planes();
-        if let Ok(built) = build(s, &trial, &planes) {
+        regions.update(s, &trial, n + 1);
+        let planes = regions.fits(s.rule).planes();
+        if let Ok(built) = build_sized(s, &trial, &planes, &regions.sizes()) {
             labels.copy_from_slice(&trial);
             return Some(built);
         }
@@ -1720,7 +1863,15 @@ mod tests {
                 })
                 .collect();
             let mut tried = HashSet::new();
-            let (poly, _, _) = resplit(s, sides, &mut labels, 5, &mut tried).unwrap();
+            let (poly, _, _) = resplit(
+                s,
+                &mut Regions::default(),
+                sides,
+                &mut labels,
+                5,
+                &mut tried,
+            )
+            .unwrap();
             assert_eq!(poly.polygons.len(), 6);
             assert_eq!(poly.positions.len(), 8);
             assert!(poly.polygons.iter().all(|p| p.len() == 4));
@@ -1728,7 +1879,15 @@ mod tests {
             let pairs: HashSet<(u32, u32)> =
                 labels.iter().copied().zip(sides.iter().copied()).collect();
             assert_eq!(pairs.len(), 6, "{pairs:?}");
-            assert!(resplit(s, sides, &mut labels, 6, &mut tried).is_none());
+            assert!(resplit(
+                s,
+                &mut Regions::default(),
+                sides,
+                &mut labels,
+                6,
+                &mut tried
+            )
+            .is_none());
         });
     }
 
