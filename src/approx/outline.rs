@@ -869,19 +869,37 @@ impl Regions {
         // old region all its faces come from (NONE: no face, MANY: more than one).
         const NONE: u32 = u32::MAX;
         const MANY: u32 = u32::MAX - 1;
-        let mut from = vec![NONE; n];
+        let mut from = vec![MANY; n];
         if self.labels.len() == labels.len() {
-            let mut to = vec![NONE; self.moments.len()];
+            // Over the faces whose label changed (few, but for a merge's renumbering); the
+            // others only mark their region as keeping faces (`stays`).
+            let m = self.moments.len();
+            let (mut to, mut moved, mut stays) = (vec![NONE; m], vec![NONE; n], vec![false; m]);
             for (&a, &b) in self.labels.iter().zip(labels) {
+                if a == b {
+                    stays[a as usize] = true;
+                    continue;
+                }
                 let t = &mut to[a as usize];
                 *t = if *t == NONE || *t == b { b } else { MANY };
-                let f = &mut from[b as usize];
+                let f = &mut moved[b as usize];
                 *f = if *f == NONE || *f == a { a } else { MANY };
             }
             for (b, f) in from.iter_mut().enumerate() {
-                if *f < MANY && to[*f as usize] != b as u32 {
-                    *f = MANY;
-                }
+                let stays_b = b < m && stays[b];
+                *f = match moved[b] {
+                    // No face came to b: the old b, if none of its faces left.
+                    NONE if stays_b && to[b] == NONE => b as u32,
+                    // Every face of b came from a, and every face of a went to b.
+                    a if a < MANY
+                        && !stays_b
+                        && !stays[a as usize]
+                        && to[a as usize] == b as u32 =>
+                    {
+                        a
+                    }
+                    _ => MANY,
+                };
             }
         }
         let empty = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
