@@ -217,7 +217,8 @@ pub struct StageTimes {
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ApproxReport {
     pub faces: usize,
-    /// Seed of the run returned (see `ApproxOptions::restarts`) and how many runs were made.
+    /// Seed of the run returned (see `ApproxOptions::restarts`) and how many realisations the
+    /// search used (made ahead on a spare core and not used: not counted).
     pub seed_used: u64,
     pub runs: usize,
     /// Wall time of all runs together (what the caller waited).
@@ -655,10 +656,9 @@ fn best_on(
             )?,
         };
         if replaced {
-            // Made for a draw no longer the nearest: counted, not kept.
-            if let Some(Ok((_, _, made))) = tail_made.take() {
-                *runs += made;
-            }
+            // Made for a draw no longer the nearest: neither kept nor counted (`runs` counts
+            // the realisations the search uses, as made one after another).
+            tail_made = None;
         }
         i += wave;
     }
@@ -1421,6 +1421,22 @@ pub(crate) mod testing {
 mod tests {
     use super::*;
     use std::path::Path;
+
+    /// Jobs on two threads: each index once, results in index order whatever finishes first
+    /// (the early jobs are the slow ones, so the threads finish out of order).
+    #[test]
+    fn two_at_a_time_runs_each_job_once_and_returns_them_in_order() {
+        let ran = std::sync::Mutex::new(Vec::new());
+        let out = two_at_a_time(3..11, |j| {
+            std::thread::sleep(std::time::Duration::from_millis(if j < 5 { 30 } else { 1 }));
+            ran.lock().unwrap().push(j);
+            j * j
+        });
+        assert_eq!(out, (3..11).map(|j| j * j).collect::<Vec<_>>());
+        let mut ran = ran.into_inner().unwrap();
+        ran.sort_unstable();
+        assert_eq!(ran, (3..11).collect::<Vec<_>>());
+    }
 
     /// One region over a grid bent in x (`z = (x − ½)²`): its vertices' heights spread
     /// unevenly (the median of `(x − ½)²` over a uniform x is 1/16, its mean 1/12), so the

@@ -36,7 +36,7 @@ const OUTSIDE: u32 = u32::MAX;
 
 /// Area moments of a region's faces: the least-squares plane and its residual without
 /// revisiting the faces, and those of two regions merged by adding.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Moments {
     area: f64,
     /// ∫ x dA.
@@ -1783,6 +1783,51 @@ mod tests {
         let (m, t, sides) = crate::approx::testing::cube(3);
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
         test(&Surface::new(&t, &m, &normals, &areas), &sides);
+    }
+
+    /// `Regions` kept across label changes gives exactly (bit for bit) what summing every
+    /// region afresh gives: after a split (two regions change), a merge (one region grows,
+    /// the ones after the removed one are renumbered), a relabelling that swaps two regions'
+    /// numbers, and a face moved between regions.
+    #[test]
+    fn regions_kept_across_changes_equal_regions_summed_afresh() {
+        on_cube(|s, sides| {
+            let mut regions = Regions::default();
+            let same = |regions: &mut Regions, labels: &[u32], n: usize| {
+                regions.update(s, labels, n);
+                let fresh = Fits::new(s, labels, n);
+                let kept = regions.fits(s.rule);
+                for r in 0..n {
+                    assert_eq!(kept.region[r], fresh.region[r], "region {r}");
+                    assert_eq!(kept.fit[r].1.to_bits(), fresh.fit[r].1.to_bits());
+                    assert_eq!(kept.fit[r].0.n, fresh.fit[r].0.n);
+                }
+                let sizes = region_sizes(&s.face_box, labels, n);
+                assert_eq!(regions.sizes(), sizes);
+            };
+            let mut labels = sides.to_vec();
+            same(&mut regions, &labels, 6);
+            // Region 2 split: every other face of it becomes region 6.
+            for (f, l) in labels.iter_mut().enumerate() {
+                if *l == 2 && f % 2 == 0 {
+                    *l = 6;
+                }
+            }
+            same(&mut regions, &labels, 7);
+            merge(&mut labels, 0, 1);
+            same(&mut regions, &labels, 6);
+            for l in labels.iter_mut() {
+                *l = match *l {
+                    3 => 4,
+                    4 => 3,
+                    x => x,
+                };
+            }
+            same(&mut regions, &labels, 6);
+            let f = labels.iter().position(|&l| l == 5).unwrap();
+            labels[f] = 0;
+            same(&mut regions, &labels, 6);
+        });
     }
 
     /// A side of the cube cut in two adds no plane (both halves lie on the side's plane); two
