@@ -333,31 +333,6 @@ fn place(j: Junction, planes: &[Plane], x: V3) -> Option<V3> {
     }
 }
 
-/// Region bounding boxes' diagonals: how far a corner may lie from its vertex.
-fn region_sizes(face_box: &[[V3; 2]], labels: &[u32], n: usize) -> Vec<f64> {
-    let mut lo = vec![[f64::INFINITY; 3]; n];
-    let mut hi = vec![[f64::NEG_INFINITY; 3]; n];
-    // Comparisons rather than `f64::min`/`max` (whose NaN handling costs a branch per call):
-    // the boxes are finite, and this pass over every face runs once per build.
-    for (b, &r) in face_box.iter().zip(labels) {
-        let r = r as usize;
-        for k in 0..3 {
-            if b[0][k] < lo[r][k] {
-                lo[r][k] = b[0][k];
-            }
-            if b[1][k] > hi[r][k] {
-                hi[r][k] = b[1][k];
-            }
-        }
-    }
-    (0..n)
-        .map(|r| {
-            let d = sub(hi[r], lo[r]);
-            dot(d, d).sqrt()
-        })
-        .collect()
-}
-
 /// The corners of every vertex where regions meet (see the module doc); corners of one
 /// junction closer than `tol` are one.
 fn corners(
@@ -717,11 +692,13 @@ pub(crate) type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
 /// The polygon mesh of a partition with its planes, and its triangles (in the polygons'
 /// planes); corners index into one shared list.
 pub fn build(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Built, Defect> {
-    let size = region_sizes(&s.face_box, labels, planes.len());
-    build_sized(s, labels, planes, &size)
+    let mut regions = Regions::default();
+    regions.update(s, labels, planes.len());
+    build_sized(s, labels, planes, &regions.sizes())
 }
 
-/// [`build`] with the regions' bounding-box diagonals given (`size`).
+/// [`build`] with the regions' bounding-box diagonals given (`size`): how far a corner may lie
+/// from its vertex.
 fn build_sized(
     s: &Surface<'_>,
     labels: &[u32],
@@ -1802,7 +1779,19 @@ mod tests {
                     assert_eq!(kept.fit[r].1.to_bits(), fresh.fit[r].1.to_bits());
                     assert_eq!(kept.fit[r].0.n, fresh.fit[r].0.n);
                 }
-                let sizes = region_sizes(&s.face_box, labels, n);
+                let sizes: Vec<f64> = (0..n as u32)
+                    .map(|r| {
+                        let mut b = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+                        for (fb, _) in s.face_box.iter().zip(labels).filter(|x| *x.1 == r) {
+                            for k in 0..3 {
+                                b[0][k] = b[0][k].min(fb[0][k]);
+                                b[1][k] = b[1][k].max(fb[1][k]);
+                            }
+                        }
+                        let d = sub(b[1], b[0]);
+                        dot(d, d).sqrt()
+                    })
+                    .collect();
                 assert_eq!(regions.sizes(), sizes);
             };
             let mut labels = sides.to_vec();
