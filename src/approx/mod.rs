@@ -718,6 +718,18 @@ fn smooth(
     if opts.k == 0 {
         return Err(ApproxError::BadInput("K must be at least 1".into()));
     }
+    // The realisation walks each vertex's faces as one fan, in one orientation (the CLI's
+    // validation refuses other meshes; a library caller's topology is checked here).
+    if let Some(&v) = topo.nonmanifold_vertices.first() {
+        return Err(ApproxError::BadInput(format!(
+            "vertex {v} is non-manifold (its faces form more than one fan)"
+        )));
+    }
+    if !topo.consistently_oriented {
+        return Err(ApproxError::BadInput(
+            "the faces are not consistently oriented".into(),
+        ));
+    }
     let (closed, open) = outline::components(topo);
     let least = 4 * closed + open;
     if opts.k < least {
@@ -1421,6 +1433,33 @@ pub(crate) mod testing {
 mod tests {
     use super::*;
     use std::path::Path;
+
+    /// Two grids sharing one corner vertex (a bowtie there): refused as bad input, naming the
+    /// vertex, before any work.
+    #[test]
+    fn a_non_manifold_vertex_is_refused_as_bad_input() {
+        let (g, _) = testing::grid(3);
+        let mut m = g.clone();
+        let shift = g.positions.len() as u32;
+        // The second grid's first corner is the first grid's last (vertex 8): drop its own.
+        m.positions.extend(
+            g.positions
+                .iter()
+                .skip(1)
+                .map(|p| [p[0] + 2.0, p[1] + 2.0, 0.0]),
+        );
+        let map = |v: u32| if v == 0 { 8 } else { v + shift - 1 };
+        m.faces.extend(g.faces.iter().map(|f| f.map(map)));
+        let t = Topology::build(&m, Path::new("bowtie")).unwrap();
+        assert_eq!(t.nonmanifold_vertices, vec![8]);
+        match approximate(&m, &t, &ApproxOptions::new(8), &mut |_| {}) {
+            Err(e @ ApproxError::BadInput(_)) => {
+                assert_eq!(e.exit_code(), 2);
+                assert!(e.to_string().contains("vertex 8"), "{e}");
+            }
+            other => panic!("{:?}", other.map(|o| o.report)),
+        }
+    }
 
     /// Jobs on two threads: each index once, results in index order whatever finishes first
     /// (the early jobs are the slow ones, so the threads finish out of order).
