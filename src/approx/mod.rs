@@ -424,34 +424,6 @@ fn best_run(
 /// realisations it made.
 type Drawn = (Result<(Run, Partitioned), ApproxError>, usize);
 
-/// `job(j)` for every `j` of `js` on two threads, each taking the next `j` when free (jobs
-/// differ in cost); the results in the order of `js`.
-fn two_at_a_time<T: Send>(js: std::ops::Range<usize>, job: impl Fn(usize) -> T + Sync) -> Vec<T> {
-    let next = std::sync::atomic::AtomicUsize::new(js.start);
-    let work = || {
-        let mut done = Vec::new();
-        loop {
-            let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            if j >= js.end {
-                return done;
-            }
-            done.push((j, job(j)));
-        }
-    };
-    let mut all = std::thread::scope(|scope| {
-        let other = scope.spawn(work);
-        let mut all = work();
-        all.extend(
-            other
-                .join()
-                .unwrap_or_else(|e| std::panic::resume_unwind(e)),
-        );
-        all
-    });
-    all.sort_by_key(|&(j, _)| j);
-    all.into_iter().map(|(_, t)| t).collect()
-}
-
 /// The draws of [`best_run`] on `surface` (its plane rule), seeds `opts.seed ..= opts.seed +
 /// last` at most, the nearest valid one kept and finished; `runs` counts the realisations
 /// made, `t` is when the whole run started.
@@ -514,14 +486,11 @@ fn best_on(
             realise(mesh, surface, &sub, smoothed, &part, true, progress)
         };
         let (first, mut beside) = if spare {
-            std::thread::scope(|scope| {
-                let h = scope.spawn(|| alone(seed, &part, &mut |_| {}));
-                let first = give_away(&mut |_| {});
-                (
-                    first,
-                    Some(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
-                )
-            })
+            let (first, beside) = rayon::join(
+                || give_away(&mut |_| {}),
+                || alone(seed, &part, &mut |_| {}),
+            );
+            (first, Some(beside))
         } else {
             (give_away(progress), None)
         };
@@ -544,7 +513,7 @@ fn best_on(
         realised(seed, part, false, progress)
     };
     // Two further candidates on the kept draw `(b, part)`, independent of each other (each
-    // reads only the kept draw's partition), so made on two threads; the nearest of the three
+    // reads only the kept draw's partition), so made in parallel; the nearest of the three
     // is returned with the realisations made:
     // - if it gave regions away with all K regions left, its partition realised with merges
     //   alone too;
@@ -559,15 +528,11 @@ fn best_on(
         };
         let (b, fill, mut made) = if b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k
         {
-            std::thread::scope(|scope| {
-                let h = scope.spawn(|| fill(false));
-                let b = nearer(b, alone(seed, &part, &mut |_| {}));
-                (
-                    b,
-                    h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)),
-                    1,
-                )
-            })
+            let (b, fill) = rayon::join(
+                || nearer(b, alone(seed, &part, &mut |_| {})),
+                || fill(false),
+            );
+            (b, fill, 1)
         } else {
             (Ok(b), fill(true), 0)
         };
@@ -589,7 +554,7 @@ fn best_on(
     // made, and the mesh kept (the nearest of them all), do not depend on the machine; a
     // restart drawn beside the one that made it unnecessary is kept too: it is made anyway.
     // The draws before the first wave end that can stop the search are made in any case, and
-    // are run on two threads each taking the next seed when free (draws differ in cost).
+    // are made in parallel (rayon; results in seed order, whichever finishes first).
     let certain = (2 * tries.div_ceil(2)).min(last + 1);
     // Each draw kept if nearest so far, in seed order (ties go to the earlier seed); whether
     // one was.
@@ -621,7 +586,11 @@ fn best_on(
             vec![draw(seed_of(from), progress)]
         } else {
             progress(Stage::Cluster);
-            two_at_a_time(from..to, |j| draw(seed_of(j), &mut |_| {}))
+            use rayon::prelude::*;
+            (from..to)
+                .into_par_iter()
+                .map(|j| draw(seed_of(j), &mut |_| {}))
+                .collect()
         }
     };
     absorb(
@@ -640,11 +609,8 @@ fn best_on(
             Some((b, part)) if i == last => {
                 let (b, part) = (b.clone(), part.clone());
                 progress(Stage::Cluster);
-                let (d, speculated) = std::thread::scope(|scope| {
-                    let h = scope.spawn(|| tail(b, part));
-                    let d = draw(seed_of(i), &mut |_| {});
-                    (d, h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                });
+                let (d, speculated) =
+                    rayon::join(|| draw(seed_of(i), &mut |_| {}), || tail(b, part));
                 tail_made = Some(speculated);
                 absorb(&mut best, &mut unrealised, vec![d], runs)?
             }
@@ -1459,22 +1425,6 @@ mod tests {
             }
             other => panic!("{:?}", other.map(|o| o.report)),
         }
-    }
-
-    /// Jobs on two threads: each index once, results in index order whatever finishes first
-    /// (the early jobs are the slow ones, so the threads finish out of order).
-    #[test]
-    fn two_at_a_time_runs_each_job_once_and_returns_them_in_order() {
-        let ran = std::sync::Mutex::new(Vec::new());
-        let out = two_at_a_time(3..11, |j| {
-            std::thread::sleep(std::time::Duration::from_millis(if j < 5 { 30 } else { 1 }));
-            ran.lock().unwrap().push(j);
-            j * j
-        });
-        assert_eq!(out, (3..11).map(|j| j * j).collect::<Vec<_>>());
-        let mut ran = ran.into_inner().unwrap();
-        ran.sort_unstable();
-        assert_eq!(ran, (3..11).collect::<Vec<_>>());
     }
 
     /// One region over a grid bent in x (`z = (x − ½)²`): its vertices' heights spread

@@ -788,16 +788,9 @@ struct Fits {
 impl Fits {
     /// The fits of `s`'s faces under `labels`, by the surface's plane rule.
     fn new(s: &Surface<'_>, labels: &[u32], n: usize) -> Fits {
-        let mut region = vec![Moments::default(); n];
-        for (f, &r) in labels.iter().enumerate() {
-            region[r as usize] = region[r as usize].add(&s.moments[f]);
-        }
-        let fit = region.iter().map(|m| fit_or_flat(m, s.rule)).collect();
-        Fits {
-            region,
-            fit,
-            rule: s.rule,
-        }
+        let mut regions = Regions::default();
+        regions.update(s, labels, n);
+        regions.fits(s.rule)
     }
 
     /// The plane of faces with moments `m` and its residual, by the same rule.
@@ -932,7 +925,7 @@ impl Regions {
         self.labels.extend_from_slice(labels);
     }
 
-    /// The regions' fits (as [`Fits::new`] gives them).
+    /// The regions' fits (by the plane rule `rule`).
     fn fits(&self, rule: PlaneRule) -> Fits {
         Fits {
             region: self.moments.clone(),
@@ -1529,7 +1522,8 @@ pub fn realise(
         (polygons, triangles, triangle_region) = b;
     }
     splits += n - before;
-    let planes = Fits::new(s, &labels, n).planes();
+    regions.update(s, &labels, n);
+    let planes = regions.fits(s.rule).planes();
     Ok(Realised {
         polygons,
         triangles,
@@ -1772,12 +1766,17 @@ mod tests {
             let mut regions = Regions::default();
             let same = |regions: &mut Regions, labels: &[u32], n: usize| {
                 regions.update(s, labels, n);
-                let fresh = Fits::new(s, labels, n);
+                // Summed here, face by face, not by `Regions`.
+                let mut fresh = vec![Moments::default(); n];
+                for (f, &r) in labels.iter().enumerate() {
+                    fresh[r as usize] = fresh[r as usize].add(&s.moments[f]);
+                }
                 let kept = regions.fits(s.rule);
                 for r in 0..n {
-                    assert_eq!(kept.region[r], fresh.region[r], "region {r}");
-                    assert_eq!(kept.fit[r].1.to_bits(), fresh.fit[r].1.to_bits());
-                    assert_eq!(kept.fit[r].0.n, fresh.fit[r].0.n);
+                    assert_eq!(kept.region[r], fresh[r], "region {r}");
+                    let fit = fit_or_flat(&fresh[r], s.rule);
+                    assert_eq!(kept.fit[r].1.to_bits(), fit.1.to_bits());
+                    assert_eq!(kept.fit[r].0.n, fit.0.n);
                 }
                 let sizes: Vec<f64> = (0..n as u32)
                     .map(|r| {
