@@ -10,7 +10,7 @@
 use sprs::{CsMat, TriMat};
 
 use super::geom::{dot, mean_edge_length, normalize, V3};
-use super::sparse::{spmv, SpdSolver};
+use super::sparse::{solve_factored, spmv, SpdSolver};
 use crate::linalg::SolveError;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -100,7 +100,6 @@ pub fn smooth_normals(
         .collect();
     let mut p = vec![[0.0; 3]; ne];
     let mut lam = vec![[0.0; 3]; ne];
-    let mut beta = opts.beta0_rel * opts.alpha;
     let mut rounds = 0;
     let mut crease_edges = 0;
     let grad = |n: &Vec<Vec<f64>>, r: usize| -> V3 {
@@ -108,39 +107,52 @@ pub fn smooth_normals(
         let w = weights[r];
         [0, 1, 2].map(|k| w * (n[k][f] - n[k][g]))
     };
-    let mut spd = SpdSolver::default();
+    // The N-step's matrices depend on β alone, and the β schedule is fixed: they are factored
+    // ahead, as many at a time as there are threads (the rounds themselves are sequential).
+    let mut betas = Vec::new();
+    let mut beta = opts.beta0_rel * opts.alpha;
     while beta <= opts.beta_max && ne > 0 {
-        rounds += 1;
-        // p-step: hard threshold of w = DN + λ/β.
-        crease_edges = 0;
-        for r in 0..ne {
-            let g = grad(&n, r);
-            let w = [0, 1, 2].map(|k| g[k] + lam[r][k] / beta);
-            if dot(w, w) > 2.0 * opts.alpha / beta {
-                p[r] = w;
-                crease_edges += 1;
-            } else {
-                p[r] = [0.0; 3];
-            }
-        }
-        // N-step.
-        let a = &eye + &dtd.map(|v| beta * v);
-        let b: Vec<Vec<f64>> = (0..3)
-            .map(|k| {
-                let q: Vec<f64> = (0..ne).map(|r| beta * p[r][k] - lam[r][k]).collect();
-                let dq = spmv(&dt, &q);
-                rhs0[k].iter().zip(dq.iter()).map(|(a, b)| a + b).collect()
-            })
-            .collect();
-        spd.solve(&a, &b, &mut n, 1e-8)?;
-        // Multipliers.
-        for r in 0..ne {
-            let g = grad(&n, r);
-            for k in 0..3 {
-                lam[r][k] += beta * (g[k] - p[r][k]);
-            }
-        }
+        betas.push(beta);
         beta *= opts.kappa;
+    }
+    let mut spd = SpdSolver::default();
+    for batch in betas.chunks(rayon::current_num_threads().max(1)) {
+        let mats: Vec<CsMat<f64>> = batch
+            .iter()
+            .map(|&beta| &eye + &dtd.map(|v| beta * v))
+            .collect();
+        let factors = spd.factor_each(&mats);
+        for ((&beta, a), factor) in batch.iter().zip(&mats).zip(&factors) {
+            rounds += 1;
+            // p-step: hard threshold of w = DN + λ/β.
+            crease_edges = 0;
+            for r in 0..ne {
+                let g = grad(&n, r);
+                let w = [0, 1, 2].map(|k| g[k] + lam[r][k] / beta);
+                if dot(w, w) > 2.0 * opts.alpha / beta {
+                    p[r] = w;
+                    crease_edges += 1;
+                } else {
+                    p[r] = [0.0; 3];
+                }
+            }
+            // N-step.
+            let b: Vec<Vec<f64>> = (0..3)
+                .map(|k| {
+                    let q: Vec<f64> = (0..ne).map(|r| beta * p[r][k] - lam[r][k]).collect();
+                    let dq = spmv(&dt, &q);
+                    rhs0[k].iter().zip(dq.iter()).map(|(a, b)| a + b).collect()
+                })
+                .collect();
+            solve_factored(factor.as_ref(), a, &b, &mut n, 1e-8)?;
+            // Multipliers.
+            for r in 0..ne {
+                let g = grad(&n, r);
+                for k in 0..3 {
+                    lam[r][k] += beta * (g[k] - p[r][k]);
+                }
+            }
+        }
     }
     let normals = (0..nf)
         .map(|f| normalize([n[0][f], n[1][f], n[2][f]]).unwrap_or(n0[f]))

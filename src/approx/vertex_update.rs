@@ -39,32 +39,66 @@ impl Default for VertexUpdateOptions {
     }
 }
 
-/// Accumulates Σ w |v_b − v_a − t|² + anchor·Σ|v − x|² into normal equations.
+/// Normal equations of Σ w |v_b − v_a − t|² + anchor·Σ|v − x|² over a fixed list of pairs
+/// (a, b): the weights and targets change every round, the pairs do not, so the matrix's
+/// pattern is made once and each pair's four entries are located once (assembling from
+/// triplets sorts them every round: more time than the factorisation on large meshes).
 struct EdgeLsq {
-    t: TriMat<f64>,
+    a: CsMat<f64>,
+    diagonal: Vec<usize>,
+    /// Entries (a,a), (b,b), (a,b), (b,a) of each pair, as indices into the matrix's values.
+    slots: Vec<[usize; 4]>,
+    pairs: Vec<[usize; 2]>,
     rhs: [Vec<f64>; 3],
 }
 
 impl EdgeLsq {
-    fn new(n: usize, anchor: f64, x: &[V3]) -> EdgeLsq {
+    fn new(n: usize, pairs: &[[usize; 2]]) -> EdgeLsq {
         let mut t = TriMat::new((n, n));
-        let mut rhs = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        for i in 0..n {
+            t.add_triplet(i, i, 0.0);
+        }
+        for &[a, b] in pairs {
+            t.add_triplet(a, b, 0.0);
+            t.add_triplet(b, a, 0.0);
+        }
+        let a: CsMat<f64> = t.to_csr();
+        let at = |r: usize, c: usize| a.nnz_index(r, c).map_or(usize::MAX, |i| i.0);
+        let diagonal = (0..n).map(|i| at(i, i)).collect();
+        let slots = pairs
+            .iter()
+            .map(|&[p, q]| [at(p, p), at(q, q), at(p, q), at(q, p)])
+            .collect();
+        EdgeLsq {
+            a,
+            diagonal,
+            slots,
+            pairs: pairs.to_vec(),
+            rhs: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+        }
+    }
+
+    /// The system for the anchor to `x` and the pairs' weights and targets, in pair order.
+    fn assemble(&mut self, anchor: f64, x: &[V3], terms: impl Iterator<Item = (f64, V3)>) {
+        let values = self.a.data_mut();
+        values.fill(0.0);
         for (i, p) in x.iter().enumerate() {
-            t.add_triplet(i, i, anchor);
+            values[self.diagonal[i]] += anchor;
             for k in 0..3 {
-                rhs[k][i] += anchor * p[k];
+                self.rhs[k][i] = anchor * p[k];
             }
         }
-        EdgeLsq { t, rhs }
-    }
-    fn term(&mut self, a: usize, b: usize, w: f64, target: V3) {
-        self.t.add_triplet(a, a, w);
-        self.t.add_triplet(b, b, w);
-        self.t.add_triplet(a, b, -w);
-        self.t.add_triplet(b, a, -w);
-        for k in 0..3 {
-            self.rhs[k][b] += w * target[k];
-            self.rhs[k][a] -= w * target[k];
+        for (t, (w, target)) in terms.enumerate() {
+            let [aa, bb, ab, ba] = self.slots[t];
+            values[aa] += w;
+            values[bb] += w;
+            values[ab] -= w;
+            values[ba] -= w;
+            let [a, b] = self.pairs[t];
+            for k in 0..3 {
+                self.rhs[k][b] += w * target[k];
+                self.rhs[k][a] -= w * target[k];
+            }
         }
     }
 }
@@ -80,41 +114,55 @@ pub fn update_vertices(
     let n = mesh.positions.len();
     let mut x = mesh.positions.clone();
     let lbar = mean_edge_length(&x, &topo.edges);
+    // The pairs: every face's three edges, then (λ > 0) the wings of every interior edge,
+    // with the edge they cross.
+    let mut pairs: Vec<[usize; 2]> = Vec::with_capacity(3 * mesh.faces.len());
+    for face in &mesh.faces {
+        for k in 0..3 {
+            pairs.push([face[k] as usize, face[(k + 1) % 3] as usize]);
+        }
+    }
+    let mut wings: Vec<([usize; 2], [usize; 2], [usize; 2])> = Vec::new();
+    if opts.lambda > 0.0 {
+        for &e in &topo.interior_edges {
+            let [f, g] = topo.edge_faces[e as usize].map(|v| v as usize);
+            let [i, j] = topo.edges[e as usize].map(|v| v as usize);
+            let wing = |face: [u32; 3]| {
+                face.iter()
+                    .map(|&v| v as usize)
+                    .find(|&v| v != i && v != j)
+                    .unwrap_or(i)
+            };
+            let kl = [wing(mesh.faces[f]), wing(mesh.faces[g])];
+            pairs.push(kl);
+            wings.push((kl, [f, g], [i, j]));
+        }
+    }
+    let mut sys = EdgeLsq::new(n, &pairs);
     let mut spd = SpdSolver::default();
     for _ in 0..opts.rounds {
         let (normals, areas) = face_normals_areas(&x, &mesh.faces);
         let abar = areas.iter().sum::<f64>() / areas.len().max(1) as f64;
         let rot = |f: usize, v: V3| rotate_min(normals[f], target[f], v);
         // Anchor in units of the Laplacian weights (which are ~1 after dividing by Ā, l̄).
-        let mut sys = EdgeLsq::new(n, opts.anchor, &x);
-        for (f, face) in mesh.faces.iter().enumerate() {
+        let xr = &x;
+        let edges = mesh.faces.iter().enumerate().flat_map(|(f, face)| {
             let w = areas[f] / abar;
-            for k in 0..3 {
+            (0..3).map(move |k| {
                 let (a, b) = (face[k] as usize, face[(k + 1) % 3] as usize);
-                sys.term(a, b, w, rot(f, sub(x[b], x[a])));
-            }
-        }
-        if opts.lambda > 0.0 {
-            for &e in &topo.interior_edges {
-                let [f, g] = topo.edge_faces[e as usize].map(|v| v as usize);
-                let [i, j] = topo.edges[e as usize].map(|v| v as usize);
-                let wing = |face: [u32; 3]| {
-                    face.iter()
-                        .map(|&v| v as usize)
-                        .find(|&v| v != i && v != j)
-                        .unwrap_or(i)
-                };
-                let (k, l) = (wing(mesh.faces[f]), wing(mesh.faces[g]));
-                let d = sub(x[l], x[k]);
-                let t = scale(add(rot(f, d), rot(g, d)), 0.5);
-                let len = super::geom::norm(sub(x[j], x[i]));
-                sys.term(k, l, opts.lambda * len / lbar, t);
-            }
-        }
-        let a: CsMat<f64> = sys.t.to_csr();
-        let b: Vec<Vec<f64>> = sys.rhs.to_vec();
+                (w, rot(f, sub(xr[b], xr[a])))
+            })
+        });
+        let wing_terms = wings.iter().map(|&([k, l], [f, g], [i, j])| {
+            let d = sub(x[l], x[k]);
+            let t = scale(add(rot(f, d), rot(g, d)), 0.5);
+            let len = super::geom::norm(sub(x[j], x[i]));
+            (opts.lambda * len / lbar, t)
+        });
+        sys.assemble(opts.anchor, &x, edges.chain(wing_terms));
+        let (a, b) = (&sys.a, &sys.rhs);
         let mut cols: Vec<Vec<f64>> = (0..3).map(|k| x.iter().map(|p| p[k]).collect()).collect();
-        spd.solve(&a, &b, &mut cols, 1e-9)?;
+        spd.solve(a, b, &mut cols, 1e-9)?;
         for (i, p) in x.iter_mut().enumerate() {
             *p = [cols[0][i], cols[1][i], cols[2][i]];
         }

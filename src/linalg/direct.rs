@@ -306,10 +306,17 @@ impl CholeskySymbolic {
         self.n
     }
 
+    /// Whether `a` has exactly the pattern this was built from (what [`Self::factor`] needs).
+    pub fn fits(&self, a: &CsMat<f64>) -> bool {
+        csr_parts(a).is_ok_and(|(indptr, indices, _)| {
+            a.rows() == self.n && *indptr == *self.indptr && indices == self.indices
+        })
+    }
+
     /// Numerically factors `a`, which must have exactly the pattern this was built from.
     pub fn factor(&self, a: &CsMat<f64>) -> Result<Cholesky, DirectError> {
-        let (indptr, indices, data) = csr_parts(a)?;
-        if a.rows() != self.n || *indptr != *self.indptr || indices != self.indices {
+        let (_, _, data) = csr_parts(a)?;
+        if !self.fits(a) {
             return Err(DirectError::Pattern {
                 what: "the matrix's sparsity pattern differs from the symbolic factorisation's"
                     .into(),
