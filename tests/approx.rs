@@ -711,7 +711,7 @@ fn outline_splits_an_unrealisable_partition_into_the_cube_sides() {
     let t = topo(&m);
     let (normals, areas) = face_normals_areas(&m.positions, &m.faces);
     let s = Surface::new(&t, &m, &normals, &areas);
-    let r = outline::realise(&s, vec![0; m.faces.len()], 1, 6, true).unwrap();
+    let r = outline::realise(&s, vec![0; m.faces.len()], 1, 6, true, &Default::default()).unwrap();
     assert_eq!(r.planes.len(), 6);
     assert_eq!(r.merges, 0);
     assert!(r.splits >= 5 && !r.defects.is_empty());

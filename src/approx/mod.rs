@@ -47,6 +47,7 @@ mod relabel;
 pub mod sparse;
 pub mod vertex_update;
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use crate::linalg::SolveError;
@@ -457,16 +458,8 @@ fn best_on(
     // Giving a region away stops the cascade of merges that a region whose outline crosses
     // itself starts, but it can start one of its own: `o`'s partition realised with merges
     // alone too (`alone`), and the mesh nearer the input kept.
-    let alone = |seed: u64, part: &Partitioned, progress: &mut dyn FnMut(Stage)| {
-        realise(
-            mesh,
-            surface,
-            &with_seed(seed),
-            smoothed,
-            part,
-            false,
-            progress,
-        )
+    let alone = |seed: u64, part: &Partitioned, stop: &AtomicBool| {
+        realise(mesh, surface, &with_seed(seed), smoothed, part, false, stop)
     };
     let nearer = |o: Run, alone: Result<Run, ApproxError>| match alone {
         Ok(m) if key(&m) < key(&o) => Ok(m),
@@ -476,41 +469,47 @@ fn best_on(
     // One seed: its partition, realised giving regions away, or with merges alone where
     // that realises nothing; with the realisations made. Where it gave a region away and
     // ended below K regions (merges the budget could not win back: a cascade), the merges-
-    // alone realisation is made here, in the draw — which draw ends nearest is only known
-    // once both are realised. (One with all K regions is realised so only if kept.) With a
-    // core to `spare`, the merges-alone realisation is made beside the other in any case
-    // (counted only where used: it changes no result, only when it is ready).
-    let realised = |seed: u64, part: Partitioned, spare: bool, progress: &mut dyn FnMut(Stage)| {
+    // alone realisation is made too — which ends nearest is only known once both are
+    // realised. (One with all K regions is realised so only if kept.) The merges-alone
+    // realisation is offered to the pool beside the other: a thread with nothing else to do
+    // starts it at once, and it is stopped as soon as the other shows it is not wanted;
+    // else it is made after the other, if wanted. Its result, when used, is the same
+    // either way.
+    let realised = |seed: u64, part: Partitioned| {
         let sub = with_seed(seed);
-        let give_away = |progress: &mut dyn FnMut(Stage)| {
-            realise(mesh, surface, &sub, smoothed, &part, true, progress)
+        let wanted = |first: &Result<Run, ApproxError>| match first {
+            Err(ApproxError::Unrealisable(_)) => true,
+            Ok(o) => o.report.regions_dissolved > 0 && o.report.k_obtained < sub.k,
+            Err(_) => false,
         };
-        let (first, mut beside) = if spare {
-            let (first, beside) = rayon::join(
-                || give_away(&mut |_| {}),
-                || alone(seed, &part, &mut |_| {}),
-            );
-            (first, Some(beside))
-        } else {
-            (give_away(progress), None)
-        };
-        let mut second = |progress: &mut dyn FnMut(Stage)| {
-            beside
-                .take()
-                .unwrap_or_else(|| alone(seed, &part, progress))
-        };
-        let (out, made) = match first {
-            Err(ApproxError::Unrealisable(_)) => (second(progress), 2),
-            Ok(o) if o.report.regions_dissolved > 0 && o.report.k_obtained < sub.k => {
-                (nearer(o, second(progress)), 2)
+        let unwanted = AtomicBool::new(false);
+        let (first, beside) = rayon::join(
+            || {
+                let never = AtomicBool::new(false);
+                let first = realise(mesh, surface, &sub, smoothed, &part, true, &never);
+                if !wanted(&first) {
+                    unwanted.store(true, Ordering::Relaxed);
+                }
+                first
+            },
+            || (!unwanted.load(Ordering::Relaxed)).then(|| alone(seed, &part, &unwanted)),
+        );
+        let (out, made) = if wanted(&first) {
+            // `unwanted` was never set: `beside` ran to its end.
+            let second = beside.unwrap_or_else(|| alone(seed, &part, &AtomicBool::new(false)));
+            match first {
+                Ok(o) => (nearer(o, second), 2),
+                _ => (second, 2),
             }
-            out => (out, 1),
+        } else {
+            (first, 1)
         };
         (out.map(|o| (o, part)), made)
     };
     let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
         let part = partition(mesh, surface, &with_seed(seed), smoothed, progress);
-        realised(seed, part, false, progress)
+        progress(Stage::Polygons);
+        realised(seed, part)
     };
     // Two further candidates on the kept draw `(b, part)`, independent of each other (each
     // reads only the kept draw's partition), so made in parallel; the nearest of the three
@@ -522,19 +521,18 @@ fn best_on(
     //   ends farther from the input for it.
     let tail = |b: Run, part: Partitioned| -> Result<(Run, Partitioned, usize), ApproxError> {
         let seed = b.report.seed_used;
-        let fill = |spare: bool| {
-            filled(mesh, surface, &with_seed(seed), smoothed, &part)
-                .map(|fp| realised(seed, fp, spare, &mut |_| {}))
+        let fill = || {
+            filled(mesh, surface, &with_seed(seed), smoothed, &part).map(|fp| realised(seed, fp))
         };
         let (b, fill, mut made) = if b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k
         {
             let (b, fill) = rayon::join(
-                || nearer(b, alone(seed, &part, &mut |_| {})),
-                || fill(false),
+                || nearer(b, alone(seed, &part, &AtomicBool::new(false))),
+                fill,
             );
             (b, fill, 1)
         } else {
-            (Ok(b), fill(true), 0)
+            (Ok(b), fill(), 0)
         };
         let b = b?;
         let Some((out, fill_made)) = fill else {
@@ -1087,7 +1085,8 @@ impl From<Run> for ApproxOutput {
 
 /// Stage 4, the partition realised by [`outline::realise`] (with `give_away` or merges
 /// alone): polygons whose corners are where the planes meet, the partition split or merged
-/// where they cannot realise it; then stages 5–6 ([`finish`]).
+/// where they cannot realise it; then stages 5–6 ([`finish`]). Ends early, unrealised, once
+/// `stop` is set.
 fn realise(
     mesh: &TriMesh,
     surface: &outline::Surface<'_>,
@@ -1095,9 +1094,8 @@ fn realise(
     smoothed: &Smoothed,
     part: &Partitioned,
     give_away: bool,
-    progress: &mut dyn FnMut(Stage),
+    stop: &AtomicBool,
 ) -> Result<Run, ApproxError> {
-    progress(Stage::Polygons);
     let t = Instant::now();
     if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
         eprintln!(
@@ -1106,8 +1104,15 @@ fn realise(
             part.error / geom::bbox_diagonal(mesh)
         );
     }
-    let r = outline::realise(surface, part.labels.clone(), part.n, opts.k, give_away)
-        .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
+    let r = outline::realise(
+        surface,
+        part.labels.clone(),
+        part.n,
+        opts.k,
+        give_away,
+        stop,
+    )
+    .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
     Ok(finish(mesh, surface, opts, smoothed, part, r, t, 0.0))
 }
 
@@ -1438,7 +1443,15 @@ mod tests {
         let topo = Topology::build(&mesh, Path::new("generated")).unwrap();
         let (normals, areas) = face_normals_areas(&mesh.positions, &mesh.faces);
         let surface = outline::Surface::new(&topo, &mesh, &normals, &areas);
-        let mut r = outline::realise(&surface, vec![0; mesh.faces.len()], 1, 1, true).unwrap();
+        let mut r = outline::realise(
+            &surface,
+            vec![0; mesh.faces.len()],
+            1,
+            1,
+            true,
+            &Default::default(),
+        )
+        .unwrap();
         let at = cluster::vertex_clusters(&topo, &r.labels);
         let before = input_distances(&mesh.positions, &at, &r.planes).0;
         let diag = geom::bbox_diagonal(&mesh);

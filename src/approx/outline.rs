@@ -22,6 +22,7 @@
 
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::geom::{add, cross, dot, normalize, principal_axis, scale, sub, Plane, PlaneRule, V3};
 use super::intersect::first_crossing;
@@ -154,7 +155,8 @@ impl Moments {
     }
 }
 
-/// Why a partition has no valid polygon mesh, with the regions to change.
+/// Why a partition has no valid polygon mesh, with the regions to change (or why its
+/// realisation ended without one).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum Defect {
     /// The corner of these regions lies farther from its input vertex than the largest of
@@ -184,6 +186,9 @@ pub enum Defect {
     /// Two polygons cross each other.
     #[error("the polygons of regions {regions:?} cross each other")]
     Crossing { regions: [u32; 2] },
+    /// The realisation was stopped before it ended: its result was no longer wanted.
+    #[error("the realisation was stopped (its result was no longer wanted)")]
+    Stopped,
 }
 
 impl Defect {
@@ -201,6 +206,7 @@ impl Defect {
             Defect::Outline { region, regions } if regions.is_empty() => vec![*region],
             Defect::Outline { regions, .. } => regions.clone(),
             Defect::Crossing { regions } => regions.to_vec(),
+            Defect::Stopped => Vec::new(),
         };
         r.retain(|&x| x != OUTSIDE);
         r
@@ -694,22 +700,19 @@ pub(crate) type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
 pub fn build(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Built, Defect> {
     let mut regions = Regions::default();
     regions.update(s, labels, planes.len());
-    build_sized(s, labels, planes, &regions.sizes())
+    build_sized(s, planes, &mut regions)
 }
 
-/// [`build`] with the regions' bounding-box diagonals given (`size`): how far a corner may lie
-/// from its vertex.
-fn build_sized(
-    s: &Surface<'_>,
-    labels: &[u32],
-    planes: &[Plane],
-    size: &[f64],
-) -> Result<Built, Defect> {
+/// [`build`] of the labels of `regions`' last update, with their bounding-box diagonals (how
+/// far a corner may lie from its vertex) and boundary loops (traced here for the regions whose
+/// faces changed since, kept for the next build).
+fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Result<Built, Defect> {
     let (topo, faces) = (s.topo, s.faces);
+    let size = regions.sizes();
     // Corners closer than the tolerance are one point at the output's precision: at one
     // junction they are merged, at two they are a defect (two corners on one point pinch the
     // polygons between them).
-    let cs = corners(s, labels, planes, size)?;
+    let cs = corners(s, &regions.labels, planes, &size)?;
     if let Some(d) = coincident(&cs, s.tol) {
         return Err(d);
     }
@@ -719,12 +722,11 @@ fn build_sized(
     };
     let mut tris: Vec<[u32; 3]> = Vec::new();
     let mut tri_region: Vec<u32> = Vec::new();
-    for (r, region_loops) in region_loops(topo, faces, labels, planes.len())
-        .into_iter()
-        .enumerate()
-    {
+    regions.trace_loops(s);
+    for (r, region_loops) in regions.loops.iter().enumerate() {
         let r = r as u32;
-        let outlines = region_outlines(topo, faces, labels, &cs, r, &region_loops)?;
+        let region_loops = region_loops.as_deref().unwrap_or_default();
+        let outlines = region_outlines(topo, faces, &regions.labels, &cs, r, region_loops)?;
         let (poly, t) = region_polygon(&cs, &planes[r as usize], r, &outlines)?;
         mesh.holes += outlines.len() - 1;
         tri_region.extend(std::iter::repeat_n(r, t.len()));
@@ -830,6 +832,8 @@ struct Regions {
     moments: Vec<Moments>,
     fit: Vec<(Plane, f64)>,
     boxes: Vec<[V3; 2]>,
+    /// Each region's boundary loops ([`region_loops`]), once a build has traced them.
+    loops: Vec<Option<Vec<Vec<u32>>>>,
 }
 
 impl Regions {
@@ -919,10 +923,36 @@ impl Regions {
                 }
             })
             .collect();
+        let mut old_loops = std::mem::take(&mut self.loops);
+        old_loops.resize(self.moments.len(), None);
+        self.loops = (0..n)
+            .map(|b| {
+                if kept(b) {
+                    old_loops[from[b] as usize].take()
+                } else {
+                    None
+                }
+            })
+            .collect();
         self.moments = moments;
         self.boxes = boxes;
         self.labels.clear();
         self.labels.extend_from_slice(labels);
+    }
+
+    /// Traces the boundary loops ([`region_loops`]) of the regions that have none since their
+    /// faces last changed.
+    fn trace_loops(&mut self, s: &Surface<'_>) {
+        let want: Vec<bool> = self.loops.iter().map(Option::is_none).collect();
+        if !want.contains(&true) {
+            return;
+        }
+        let traced = region_loops(s.topo, s.faces, &self.labels, want.len(), &want);
+        for ((cached, loops), want) in self.loops.iter_mut().zip(traced).zip(want) {
+            if want {
+                *cached = Some(loops);
+            }
+        }
     }
 
     /// The regions' fits (by the plane rule `rule`).
@@ -1335,13 +1365,15 @@ fn hash_of(labels: &[u32]) -> u64 {
 /// to a quarter (a curved region's), then to the boundaries of the given partition that
 /// merges removed (`resplit`), then to the worst-fitting region while a split lowers its
 /// residual at all (`spend_budget`). `Err` when a defect involves no pair of adjacent
-/// regions left to merge.
+/// regions left to merge, or [`Defect::Stopped`] once `stop` is set (a realisation made
+/// beside another whose result may make it unnecessary).
 pub fn realise(
     s: &Surface<'_>,
     mut labels: Vec<u32>,
     mut n: usize,
     k: usize,
     give_away: bool,
+    stop: &AtomicBool,
 ) -> Result<Realised, Defect> {
     let (topo, faces) = (s.topo, s.faces);
     let face_moments = &s.moments[..];
@@ -1354,10 +1386,14 @@ pub fn realise(
     let mut unsplittable: Vec<bool> = vec![false; n];
     let split = |labels: &mut [u32], r: u32, n: usize| s.split(labels, r, n);
     let mut regions = Regions::default();
+    let stopped = || stop.load(Ordering::Relaxed);
     let (mut polygons, mut triangles, mut triangle_region) = loop {
+        if stopped() {
+            return Err(Defect::Stopped);
+        }
         regions.update(s, &labels, n);
         let fits = regions.fits(s.rule);
-        let defect = match build_sized(s, &labels, &fits.planes(), &regions.sizes()) {
+        let defect = match build_sized(s, &fits.planes(), &mut regions) {
             Ok(x) => break x,
             Err(d) => d,
         };
@@ -1487,13 +1523,14 @@ pub fn realise(
         &mut unsplittable,
         0.25,
         &normals,
+        stop,
     ) {
         (polygons, triangles, triangle_region) = b;
     }
     // Then the boundaries of the given partition that the realisation merged away, where
     // they are realisable now.
     let mut resplit_tried = HashSet::new();
-    while n < k {
+    while n < k && !stopped() {
         let Some(built) = resplit(
             s,
             &mut regions,
@@ -1518,8 +1555,14 @@ pub fn realise(
         &mut unsplittable,
         1.0,
         &normals,
+        stop,
     ) {
         (polygons, triangles, triangle_region) = b;
+    }
+    // Stopped while spending the budget: the phases ended early, the result is not this
+    // partition's realisation.
+    if stopped() {
+        return Err(Defect::Stopped);
     }
     splits += n - before;
     regions.update(s, &labels, n);
@@ -1570,6 +1613,7 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
         &mut unsplittable,
         1.0,
         &planes,
+        &AtomicBool::new(false),
     ) {
         (r.polygons, r.triangles, r.triangle_region) = b;
         r.planes = Fits::new(s, &r.labels, n).planes();
@@ -1602,11 +1646,12 @@ fn spend_budget<M: super::lloyd::Metric>(
     unsplittable: &mut Vec<bool>,
     keep: f64,
     metric: &M,
+    stop: &AtomicBool,
 ) -> Option<Built> {
     let mut last = None;
     regions.update(s, labels, *n);
     let mut fits = regions.fits(s.rule);
-    while *n < k {
+    while *n < k && !stop.load(Ordering::Relaxed) {
         let Some(worst) = (0..*n)
             .filter(|&r| !unsplittable[r] && fits.fit[r].1 > 0.0)
             .max_by(|&a, &b| fits.fit[a].1.total_cmp(&fits.fit[b].1))
@@ -1633,7 +1678,7 @@ fn spend_budget<M: super::lloyd::Metric>(
             if kept > keep * was || kept >= was {
                 return None;
             }
-            build_sized(s, &trial, &after.planes(), &regions.sizes())
+            build_sized(s, &after.planes(), regions)
                 .ok()
                 .map(|b| (trial, b, after))
         });
@@ -1718,7 +1763,7 @@ fn resplit(
         }
         regions.update(s, &trial, n + 1);
         let planes = regions.fits(s.rule).planes();
-        if let Ok(built) = build_sized(s, &trial, &planes, &regions.sizes()) {
+        if let Ok(built) = build_sized(s, &planes, regions) {
             labels.copy_from_slice(&trial);
             return Some(built);
         }
@@ -1757,7 +1802,8 @@ mod tests {
     }
 
     /// `Regions` kept across label changes gives exactly (bit for bit) what summing every
-    /// region afresh gives: after a split (two regions change), a merge (one region grows,
+    /// region afresh gives, and the boundary loops that tracing every region afresh gives
+    /// (traced again only where a region's faces changed): after a split (two regions change), a merge (one region grows,
     /// the ones after the removed one are renumbered), a relabelling that swaps two regions'
     /// numbers, and a face moved between regions.
     #[test]
@@ -1792,6 +1838,11 @@ mod tests {
                     })
                     .collect();
                 assert_eq!(regions.sizes(), sizes);
+                regions.trace_loops(s);
+                let traced = region_loops(s.topo, s.faces, labels, n, &vec![true; n]);
+                for (r, loops) in traced.iter().enumerate() {
+                    assert_eq!(regions.loops[r].as_ref(), Some(loops), "region {r}'s loops");
+                }
             };
             let mut labels = sides.to_vec();
             same(&mut regions, &labels, 6);
@@ -1846,7 +1897,7 @@ mod tests {
                 .iter()
                 .map(|&x| [0, 1, 0, 2, 3, 4][x as usize])
                 .collect();
-            let mut r = realise(s, merged, 5, 5, true).unwrap();
+            let mut r = realise(s, merged, 5, 5, true, &Default::default()).unwrap();
             assert_eq!(r.planes.len(), 5);
             assert_eq!(spend_on_two_planes(s, &mut r, 6), 1);
             assert_eq!((r.planes.len(), r.plane_halvings, r.splits), (6, 1, 1));

@@ -85,44 +85,38 @@ pub(super) fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2])
 }
 
 /// Region loops as vertex cycles (each in face direction: counter-clockwise seen along the
-/// normal for the outer loop, clockwise for holes). Each region's loops start at its
-/// boundary vertices in increasing order; where a region leaves a vertex by several boundary
-/// half-edges, the one of the latest face goes first.
+/// normal for the outer loop, clockwise for holes), of the regions `want`s (the others'
+/// lists are left empty). Each region's loops start at its boundary vertices in increasing
+/// order; where a region leaves a vertex by several boundary half-edges, the one of the
+/// latest face goes first. A region's loops depend on its set of faces alone.
 pub(super) fn region_loops(
     topo: &Topology,
     faces: &[[u32; 3]],
     fc: &[u32],
     n: usize,
+    want: &[bool],
 ) -> Vec<Vec<Vec<u32>>> {
     // The boundary half-edges (region, from, to) in face order.
     let mut half: Vec<(u32, u32, u32)> = Vec::new();
     for ((f, face), across) in faces.iter().enumerate().zip(&topo.face_faces) {
+        if !want[fc[f] as usize] {
+            continue;
+        }
         for (k, &g) in across.iter().enumerate() {
             if g == NO_FACE || fc[g as usize] != fc[f] {
                 half.push((fc[f], face[k], face[(k + 1) % 3]));
             }
         }
     }
-    // Grouped by source vertex, face order kept within a group (a counting sort).
-    let nv = topo.n_vertices;
-    let mut start = vec![0u32; nv + 1];
-    for h in &half {
-        start[h.1 as usize + 1] += 1;
-    }
-    for v in 0..nv {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    let mut by_source = vec![0u32; half.len()];
-    for (i, h) in half.iter().enumerate() {
-        by_source[fill[h.1 as usize] as usize] = i as u32;
-        fill[h.1 as usize] += 1;
-    }
+    // Grouped by source vertex, face order kept within a group (a stable sort).
+    let mut by_source: Vec<u32> = (0..half.len() as u32).collect();
+    by_source.sort_by_key(|&i| half[i as usize].1);
     let mut used = vec![false; half.len()];
     // The latest unused half-edge of region r leaving v.
     let mut take = |r: u32, v: u32| -> Option<u32> {
-        let group = &by_source[start[v as usize] as usize..start[v as usize + 1] as usize];
-        let &i = group
+        let lo = by_source.partition_point(|&i| half[i as usize].1 < v);
+        let hi = lo + by_source[lo..].partition_point(|&i| half[i as usize].1 == v);
+        let &i = by_source[lo..hi]
             .iter()
             .rev()
             .find(|&&i| !used[i as usize] && half[i as usize].0 == r)?;

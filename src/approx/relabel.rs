@@ -231,7 +231,7 @@ mod tests {
         let f = 2 * (10 * k + 9);
         assert_eq!(mesh.faces[f], [id(k, 9, 10), id(k, 10, 10), id(k, 10, 11)]);
         labels[f] = 1;
-        let mut r = outline::realise(&surface, labels, 2, 2, true).unwrap();
+        let mut r = outline::realise(&surface, labels, 2, 2, true, &Default::default()).unwrap();
         assert_eq!(r.labels[f], 1, "the realisation kept the partition");
         let diag = geom::bbox_diagonal(&mesh);
         let before = input_distances(
