@@ -174,3 +174,57 @@ pub fn update_vertices(
     }
     Ok(x)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::approx::testing::grid;
+
+    /// The system assembled into the pattern made once is the one the terms' triplets sum to,
+    /// for any weights and targets (two rounds of different ones through one `EdgeLsq`), with
+    /// pairs that repeat (each interior edge is two faces' edge) and wing pairs.
+    #[test]
+    fn assembled_in_place_equals_the_triplets_summed() {
+        let (mesh, _) = grid(5);
+        let n = mesh.positions.len();
+        let mut pairs: Vec<[usize; 2]> = mesh
+            .faces
+            .iter()
+            .flat_map(|f| (0..3).map(move |k| [f[k] as usize, f[(k + 1) % 3] as usize]))
+            .collect();
+        pairs.extend([[0, 12], [24, 3], [7, 17]]);
+        let mut sys = EdgeLsq::new(n, &pairs);
+        for round in 0..2 {
+            let value = |t: usize, k: usize| ((t * 7 + k * 3 + round * 5) % 11) as f64 / 11.0 + 0.1;
+            let terms: Vec<(f64, V3)> = (0..pairs.len())
+                .map(|t| (value(t, 0), [value(t, 1), -value(t, 2), value(t, 3)]))
+                .collect();
+            let anchor = 1e-3 * (round + 1) as f64;
+            sys.assemble(anchor, &mesh.positions, terms.iter().copied());
+            let mut tri = TriMat::new((n, n));
+            let mut rhs = vec![[0.0; 3]; n];
+            for (i, p) in mesh.positions.iter().enumerate() {
+                tri.add_triplet(i, i, anchor);
+                rhs[i] = scale(*p, anchor);
+            }
+            for (&[a, b], &(w, t)) in pairs.iter().zip(&terms) {
+                for (r, c, v) in [(a, a, w), (b, b, w), (a, b, -w), (b, a, -w)] {
+                    tri.add_triplet(r, c, v);
+                }
+                rhs[b] = add(rhs[b], scale(t, w));
+                rhs[a] = sub(rhs[a], scale(t, w));
+            }
+            let want: CsMat<f64> = tri.to_csr();
+            assert_eq!(sys.a.indptr().raw_storage(), want.indptr().raw_storage());
+            assert_eq!(sys.a.indices(), want.indices());
+            for (x, y) in sys.a.data().iter().zip(want.data()) {
+                assert!((x - y).abs() <= 1e-12, "{x} vs {y}");
+            }
+            for (i, r) in rhs.iter().enumerate() {
+                for k in 0..3 {
+                    assert!((sys.rhs[k][i] - r[k]).abs() <= 1e-12);
+                }
+            }
+        }
+    }
+}
