@@ -1803,9 +1803,9 @@ mod tests {
 
     /// `Regions` kept across label changes gives exactly (bit for bit) what summing every
     /// region afresh gives, and the boundary loops that tracing every region afresh gives
-    /// (traced again only where a region's faces changed): after a split (two regions change), a merge (one region grows,
-    /// the ones after the removed one are renumbered), a relabelling that swaps two regions'
-    /// numbers, and a face moved between regions.
+    /// (traced again only where a region's faces changed): after a split (two regions
+    /// change), a merge (one region grows, the ones after the removed one are renumbered), a
+    /// relabelling that swaps two regions' numbers, and a face moved between regions.
     #[test]
     fn regions_kept_across_changes_equal_regions_summed_afresh() {
         on_cube(|s, sides| {
@@ -1866,6 +1866,18 @@ mod tests {
             let f = labels.iter().position(|&l| l == 5).unwrap();
             labels[f] = 0;
             same(&mut regions, &labels, 6);
+        });
+    }
+
+    /// A realisation whose stop flag is set gives no polygon mesh (its result is not wanted);
+    /// the same partition unstopped gives the cube.
+    #[test]
+    fn a_stopped_realisation_gives_no_mesh() {
+        on_cube(|s, sides| {
+            let stopped = realise(s, sides.to_vec(), 6, 6, true, &AtomicBool::new(true));
+            assert_eq!(stopped.err(), Some(Defect::Stopped));
+            let r = realise(s, sides.to_vec(), 6, 6, true, &AtomicBool::new(false)).unwrap();
+            assert_eq!(r.polygons.polygons.len(), 6);
         });
     }
 
