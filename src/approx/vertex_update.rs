@@ -11,10 +11,11 @@
 //! x, y and z, plus a tiny anchor to the current positions that removes the translation null
 //! space. The rotation is linearised at the current positions, so the solve is repeated.
 
-use sprs::{CsMat, TriMat};
+use sprs::CsMat;
 
 use super::geom::{add, face_normals_areas, mean_edge_length, rotate_min, scale, sub, V3};
 use super::sparse::SpdSolver;
+use crate::linalg::pattern::BlockPattern;
 use crate::linalg::SolveError;
 use crate::mesh::{Topology, TriMesh};
 
@@ -41,38 +42,33 @@ impl Default for VertexUpdateOptions {
 
 /// Normal equations of Σ w |v_b − v_a − t|² + anchor·Σ|v − x|² over a fixed list of pairs
 /// (a, b): the weights and targets change every round, the pairs do not, so the matrix's
-/// pattern is made once and each pair's four entries are located once (assembling from
-/// triplets sorts them every round: more time than the factorisation on large meshes).
+/// pattern is the pairs' [`BlockPattern`] (made once, every entry's position precomputed)
+/// and the values are summed in place (assembling from triplets sorts them every round: more
+/// time than the factorisation on large meshes).
 struct EdgeLsq {
     a: CsMat<f64>,
-    diagonal: Vec<usize>,
     /// Entries (a,a), (b,b), (a,b), (b,a) of each pair, as indices into the matrix's values.
     slots: Vec<[usize; 4]>,
-    pairs: Vec<[usize; 2]>,
+    diagonal: Vec<usize>,
+    pairs: Vec<[u32; 2]>,
     rhs: [Vec<f64>; 3],
 }
 
 impl EdgeLsq {
-    fn new(n: usize, pairs: &[[usize; 2]]) -> EdgeLsq {
-        let mut t = TriMat::new((n, n));
-        for i in 0..n {
-            t.add_triplet(i, i, 0.0);
-        }
-        for &[a, b] in pairs {
-            t.add_triplet(a, b, 0.0);
-            t.add_triplet(b, a, 0.0);
-        }
-        let a: CsMat<f64> = t.to_csr();
-        let at = |r: usize, c: usize| a.nnz_index(r, c).map_or(usize::MAX, |i| i.0);
-        let diagonal = (0..n).map(|i| at(i, i)).collect();
+    fn new(n: usize, pairs: &[[u32; 2]]) -> EdgeLsq {
+        let pattern = BlockPattern::<1, 2>::new(n, pairs);
         let slots = pairs
             .iter()
-            .map(|&[p, q]| [at(p, p), at(q, q), at(p, q), at(q, p)])
+            .zip(&pattern.slot)
+            .map(|(&[p, q], s)| {
+                let at = |v: u32, i: usize, j: usize| pattern.pos(v, 0, s[i][j], 0);
+                [at(p, 0, 0), at(q, 1, 1), at(p, 0, 1), at(q, 1, 0)]
+            })
             .collect();
         EdgeLsq {
-            a,
-            diagonal,
+            a: pattern.matrix(vec![0.0; pattern.indices.len()]),
             slots,
+            diagonal: (0..n as u32).map(|v| pattern.diag(v, 0)).collect(),
             pairs: pairs.to_vec(),
             rhs: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
         }
@@ -94,7 +90,7 @@ impl EdgeLsq {
             values[bb] += w;
             values[ab] -= w;
             values[ba] -= w;
-            let [a, b] = self.pairs[t];
+            let [a, b] = self.pairs[t].map(|v| v as usize);
             for k in 0..3 {
                 self.rhs[k][b] += w * target[k];
                 self.rhs[k][a] -= w * target[k];
@@ -116,10 +112,10 @@ pub fn update_vertices(
     let lbar = mean_edge_length(&x, &topo.edges);
     // The pairs: every face's three edges, then (λ > 0) the wings of every interior edge,
     // with the edge they cross.
-    let mut pairs: Vec<[usize; 2]> = Vec::with_capacity(3 * mesh.faces.len());
+    let mut pairs: Vec<[u32; 2]> = Vec::with_capacity(3 * mesh.faces.len());
     for face in &mesh.faces {
         for k in 0..3 {
-            pairs.push([face[k] as usize, face[(k + 1) % 3] as usize]);
+            pairs.push([face[k], face[(k + 1) % 3]]);
         }
     }
     let mut wings: Vec<([usize; 2], [usize; 2], [usize; 2])> = Vec::new();
@@ -134,7 +130,7 @@ pub fn update_vertices(
                     .unwrap_or(i)
             };
             let kl = [wing(mesh.faces[f]), wing(mesh.faces[g])];
-            pairs.push(kl);
+            pairs.push(kl.map(|v| v as u32));
             wings.push((kl, [f, g], [i, j]));
         }
     }
@@ -179,6 +175,7 @@ pub fn update_vertices(
 mod tests {
     use super::*;
     use crate::approx::testing::grid;
+    use sprs::TriMat;
 
     /// The system assembled into the pattern made once is the one the terms' triplets sum to,
     /// for any weights and targets (two rounds of different ones through one `EdgeLsq`), with
@@ -187,10 +184,10 @@ mod tests {
     fn assembled_in_place_equals_the_triplets_summed() {
         let (mesh, _) = grid(5);
         let n = mesh.positions.len();
-        let mut pairs: Vec<[usize; 2]> = mesh
+        let mut pairs: Vec<[u32; 2]> = mesh
             .faces
             .iter()
-            .flat_map(|f| (0..3).map(move |k| [f[k] as usize, f[(k + 1) % 3] as usize]))
+            .flat_map(|f| (0..3).map(move |k| [f[k], f[(k + 1) % 3]]))
             .collect();
         pairs.extend([[0, 12], [24, 3], [7, 17]]);
         let mut sys = EdgeLsq::new(n, &pairs);
@@ -208,6 +205,7 @@ mod tests {
                 rhs[i] = scale(*p, anchor);
             }
             for (&[a, b], &(w, t)) in pairs.iter().zip(&terms) {
+                let (a, b) = (a as usize, b as usize);
                 for (r, c, v) in [(a, a, w), (b, b, w), (a, b, -w), (b, a, -w)] {
                     tri.add_triplet(r, c, v);
                 }
