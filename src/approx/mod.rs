@@ -27,10 +27,12 @@
 //!    again and the planes refitted (stage 5 again) — kept only if valid and nearer.
 //!
 //! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the valid polygon mesh
-//! nearest the input is kept. Its partition filled to K as VSA fills one ([`lloyd::fill`]) is
-//! realised too, kept if nearer. If it has fewer than K regions, the budget left goes to halvings
-//! of its regions into the two planes that fit each best ([`outline::spend_on_two_planes`]),
-//! then stages 5–6 again, kept if nearer. If no draw is realised, the tries are made again
+//! nearest the input is kept. Its partition filled to K as VSA fills one ([`lloyd::fill`], on
+//! the input's normals: the smoothing flattened what the clustering could not see) is realised
+//! too. Each of the two, if it has fewer than K regions, has the budget left go to halvings of
+//! its regions into the two planes that fit each best ([`outline::spend_on_two_planes`]), then
+//! stages 5–6 again, kept if nearer; the nearer of the two finished meshes is kept. If no draw
+//! is realised, the tries are made again
 //! with each region on the principal plane its faces face ([`geom::PlaneRule::Facing`]: a thin
 //! bent region's least-squares plane lies across it). OUT.obj is the triangulation of the
 //! polygons: the connectivity inside each region is new.
@@ -511,6 +513,37 @@ fn best_on(
         progress(Stage::Polygons);
         realised(seed, part)
     };
+    // Budget a candidate left unused (no region's normal halving could be realised) goes to
+    // two-plane halvings, then the planes are refitted and the borders relabelled again; kept
+    // if nearer. Made on the kept draw's candidates only (on every draw it would cost each
+    // one the phase), before they are compared: which is nearest is a property of the
+    // finished meshes, and a candidate with budget left may end nearer than one without.
+    let completed = |b: Run, part: &Partitioned| -> Run {
+        if b.report.k_obtained >= opts.k {
+            return b;
+        }
+        let t = Instant::now();
+        let mut r = b.realised.clone();
+        if outline::spend_on_two_planes(surface, &mut r, opts.k) == 0 {
+            return b;
+        }
+        let sub = with_seed(b.report.seed_used);
+        let halved = finish(
+            mesh,
+            surface,
+            &sub,
+            smoothed,
+            part,
+            r,
+            t,
+            b.report.seconds.polygons,
+        );
+        if key(&halved) < key(&b) {
+            halved
+        } else {
+            b
+        }
+    };
     // Two further candidates on the kept draw `(b, part)`, independent of each other (each
     // reads only the kept draw's partition), so made in parallel; the nearest of the three
     // is returned with the realisations made:
@@ -522,17 +555,24 @@ fn best_on(
     let tail = |b: Run, part: Partitioned| -> Result<(Run, Partitioned, usize), ApproxError> {
         let seed = b.report.seed_used;
         let fill = || {
-            filled(mesh, surface, &with_seed(seed), smoothed, &part).map(|fp| realised(seed, fp))
+            filled(mesh, surface, &with_seed(seed), smoothed, &part).map(|fp| {
+                let (out, made) = realised(seed, fp);
+                (out.map(|(o, fp)| (completed(o, &fp), fp)), made)
+            })
         };
         let (b, fill, mut made) = if b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k
         {
             let (b, fill) = rayon::join(
-                || nearer(b, alone(seed, &part, &AtomicBool::new(false))),
+                || {
+                    nearer(b, alone(seed, &part, &AtomicBool::new(false)))
+                        .map(|b| completed(b, &part))
+                },
                 fill,
             );
             (b, fill, 1)
         } else {
-            (Ok(b), fill(), 0)
+            let (b, fill) = rayon::join(|| completed(b, &part), fill);
+            (Ok(b), fill, 0)
         };
         let b = b?;
         let Some((out, fill_made)) = fill else {
@@ -635,24 +675,9 @@ fn best_on(
         best = Some((b, part));
     }
     // Unrealisable: the last draw's defect (the caller says which draws failed).
-    let Some((mut best, part)) = best else {
+    let Some((mut best, _)) = best else {
         return Err(unrealised.unwrap_or(ApproxError::Unrealisable(String::new())));
     };
-    // Budget the kept mesh left unused (no region's normal halving could be realised) goes to
-    // two-plane halvings, then the planes are refitted and the borders relabelled again; kept
-    // if nearer. Made on the kept mesh only: on every draw it would cost each one the phase.
-    if best.report.k_obtained < opts.k {
-        let t = Instant::now();
-        let mut r = best.realised.clone();
-        if outline::spend_on_two_planes(surface, &mut r, opts.k) > 0 {
-            let sub = with_seed(best.report.seed_used);
-            let before = best.report.seconds.polygons;
-            let halved = finish(mesh, surface, &sub, smoothed, &part, r, t, before);
-            if key(&halved) < key(&best) {
-                best = halved;
-            }
-        }
-    }
     best.report.runs = *runs;
     best.report.seconds_all_runs = t.elapsed().as_secs_f64();
     Ok(best.into())
@@ -808,8 +833,10 @@ fn partition(
 }
 
 /// `part` with the budget its corner merges left spent as VSA spends it (its incremental
-/// insertion, [`lloyd::fill`]: the region of largest L2,1 error halved until K regions),
-/// relaxed and settled as [`partition`] settles its own; `None` when nothing could be added.
+/// insertion, [`lloyd::fill`]: the region of largest L2,1 error halved until K regions,
+/// each halving relaxed within the region), settled as [`partition`] settles its own; `None`
+/// when nothing could be added. The rest of the partition is left as it is (a relaxation
+/// of the whole on the input's normals would undo the smoothed clustering's regions).
 ///
 /// Why: a region the corner merges made may be realisable as two once its planes are fitted
 /// anew; whether it is, only the realisation tells — so this is a further candidate, kept
@@ -822,19 +849,28 @@ fn filled(
     part: &Partitioned,
 ) -> Option<Partitioned> {
     let t = Instant::now();
-    let (topo, sm, a1) = (surface.topo, &smoothed.sm, &smoothed.a1);
+    // The input's normals, not the smoothed ones: the smoothing flattened what the clustering
+    // could not see (a curved face left as one region has one smoothed normal, no L2,1 error
+    // and no place to cut); the error the budget should lower is the input's.
     let metric = lloyd::Normals {
-        normals: &sm.normals,
-        areas: a1,
+        normals: &smoothed.n0,
+        areas: &smoothed.a0,
     };
     let mut labels = part.labels.clone();
     let worth = |labels: &[u32], c, new| surface.adds_a_plane(labels, c, new);
-    if lloyd::fill(topo, &metric, &mut labels, part.n, opts.k, 10, worth) == part.n {
+    if lloyd::fill(
+        surface.topo,
+        &metric,
+        &mut labels,
+        part.n,
+        opts.k,
+        10,
+        worth,
+    ) == part.n
+    {
         return None;
     }
-    let mut facts = part.facts.clone();
-    facts.lloyd_rounds += lloyd::relax(topo, &sm.normals, a1, &mut labels, opts.lloyd_rounds);
-    let mut filled = settle(mesh, surface, smoothed, labels, facts, t);
+    let mut filled = settle(mesh, surface, smoothed, labels, part.facts.clone(), t);
     filled.seconds += part.seconds;
     Some(filled)
 }
@@ -1246,7 +1282,7 @@ fn finish(
 }
 
 /// What the partition stage did, for the report.
-#[derive(Clone)]
+#[derive(Clone, Default)]
 struct PartitionFacts {
     grown: usize,
     merged: usize,
@@ -1436,6 +1472,55 @@ mod tests {
     /// unevenly (the median of `(x − ½)²` over a uniform x is 1/16, its mean 1/12), so the
     /// least-absolute-distances plane is the level plane at the median height, nearer the
     /// input than the least-squares one, and the polygon built on it is the whole border.
+    /// A roof the smoothing flattened (one smoothed normal on both sides: no L2,1 error, no
+    /// place to cut by) is still halved at its ridge when the budget is filled: the fill
+    /// measures the input's normals.
+    #[test]
+    fn the_budget_goes_where_the_input_bends_though_the_smoothing_flattened_it() {
+        let (mesh, topo) = testing::roof(8, 4);
+        let (n0, a0) = face_normals_areas(&mesh.positions, &mesh.faces);
+        let nf = mesh.faces.len();
+        let smoothed = Smoothed {
+            n0: n0.clone(),
+            a0: a0.clone(),
+            sm: normals_l0::NormalL0Result {
+                normals: vec![[0.0, 0.0, 1.0]; nf],
+                crease_edges: 0,
+                rounds: 0,
+            },
+            a1: a0.clone(),
+            seconds_normals: 0.0,
+            seconds_vertices: 0.0,
+        };
+        let surface = outline::Surface::new(&topo, &mesh, &n0, &a0);
+        let whole = vec![0; nf];
+        let part = settle(
+            &mesh,
+            &surface,
+            &smoothed,
+            whole,
+            Default::default(),
+            Instant::now(),
+        );
+        assert_eq!(part.n, 1);
+        let filled = filled(&mesh, &surface, &ApproxOptions::new(2), &smoothed, &part).unwrap();
+        assert_eq!(filled.n, 2);
+        // Faces 0..8 are left of the ridge (x ≤ 4), 8..16 right of it.
+        for f in 0..nf {
+            assert_eq!(
+                filled.labels[f] == filled.labels[0],
+                f < 8,
+                "{:?}",
+                filled.labels
+            );
+        }
+        assert!(
+            filled.error < 1e-12 * geom::bbox_diagonal(&mesh),
+            "{}",
+            filled.error
+        );
+    }
+
     #[test]
     fn refit_moves_a_curved_region_to_its_median_plane_and_keeps_the_mesh_valid() {
         let (positions, faces) = crate::init::test_grid::bumpy(40, |x, _| (x - 0.5).powi(2));
