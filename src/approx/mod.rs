@@ -27,12 +27,12 @@
 //!    again and the planes refitted (stage 5 again) — kept only if valid and nearer.
 //!
 //! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the valid polygon mesh
-//! nearest the input is kept. Its partition filled to K as VSA fills one ([`lloyd::fill`], on
-//! the input's normals: the smoothing flattened what the clustering could not see) is realised
-//! too. Each of the two, if it has fewer than K regions, has the budget left go to halvings of
-//! its regions into the two planes that fit each best ([`outline::spend_on_two_planes`]), then
-//! stages 5–6 again, kept if nearer; the nearer of the two finished meshes is kept. If no draw
-//! is realised, the tries are made again
+//! nearest the input is kept. Its partition filled to K as VSA fills one ([`lloyd::fill`]) is
+//! realised too, once by the input's normals (the smoothing flattened what the clustering could
+//! not see) and once by the smoothed ones. Each of the three, if it has fewer than K regions,
+//! has the budget left go to halvings of its regions into the two planes that fit each best
+//! ([`outline::spend_on_two_planes`]), then stages 5–6 again, kept if nearer; the nearest
+//! finished mesh is kept. If no draw is realised, the tries are made again
 //! with each region on the principal plane its faces face ([`geom::PlaneRule::Facing`]: a thin
 //! bent region's least-squares plane lies across it). OUT.obj is the triangulation of the
 //! polygons: the connectivity inside each region is new.
@@ -544,46 +544,52 @@ fn best_on(
             b
         }
     };
-    // Two further candidates on the kept draw `(b, part)`, independent of each other (each
-    // reads only the kept draw's partition), so made in parallel; the nearest of the three
-    // is returned with the realisations made:
+    // Further candidates on the kept draw `(b, part)`, independent of each other (each reads
+    // only the kept draw's partition), so made in parallel; the nearest finished mesh is
+    // returned with the realisations made:
     // - if it gave regions away with all K regions left, its partition realised with merges
     //   alone too;
-    // - its partition with the budget its corner merges left spent ([`filled`]), realised:
-    //   made on the kept draw only, as a further candidate — it replaces no draw, so no run
-    //   ends farther from the input for it.
+    // - its partition with the budget its corner merges left spent ([`filled`]), once by the
+    //   input's normals (the error measured) and once by the smoothed ones (the clustering's
+    //   signal: where the input is noisy, its cuts follow the shape), realised: made on the
+    //   kept draw only, as further candidates — they replace no draw, so no run ends farther
+    //   from the input for them.
     let tail = |b: Run, part: Partitioned| -> Result<(Run, Partitioned, usize), ApproxError> {
         let seed = b.report.seed_used;
-        let fill = || {
-            filled(mesh, surface, &with_seed(seed), smoothed, &part).map(|fp| {
-                let (out, made) = realised(seed, fp);
-                (out.map(|(o, fp)| (completed(o, &fp), fp)), made)
-            })
+        let dissolved = b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k;
+        let first = || {
+            if dissolved {
+                nearer(b, alone(seed, &part, &AtomicBool::new(false))).map(|b| completed(b, &part))
+            } else {
+                Ok(completed(b, &part))
+            }
         };
-        let (b, fill, mut made) = if b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k
-        {
-            let (b, fill) = rayon::join(
-                || {
-                    nearer(b, alone(seed, &part, &AtomicBool::new(false)))
-                        .map(|b| completed(b, &part))
-                },
-                fill,
-            );
-            (b, fill, 1)
-        } else {
-            let (b, fill) = rayon::join(|| completed(b, &part), fill);
-            (Ok(b), fill, 0)
+        let fills = || {
+            let sub = with_seed(seed);
+            let by_input = filled(mesh, surface, &sub, smoothed, &part, true);
+            let by_smoothed = filled(mesh, surface, &sub, smoothed, &part, false)
+                .filter(|fp| by_input.as_ref().is_none_or(|fi| fi.labels != fp.labels));
+            let fin = |fp: Option<Partitioned>| {
+                fp.map(|fp| {
+                    let (out, made) = realised(seed, fp);
+                    (out.map(|(o, fp)| (completed(o, &fp), fp)), made)
+                })
+            };
+            let (a, b) = rayon::join(|| fin(by_input), || fin(by_smoothed));
+            [a, b]
         };
-        let b = b?;
-        let Some((out, fill_made)) = fill else {
-            return Ok((b, part, made));
-        };
-        made += fill_made;
-        match out {
-            Ok((o, fp)) if key(&o) < key(&b) => Ok((o, fp, made)),
-            Ok(_) | Err(ApproxError::Unrealisable(_)) => Ok((b, part, made)),
-            Err(e) => Err(e),
+        let (b, fills) = rayon::join(first, fills);
+        let mut made = usize::from(dissolved);
+        let mut best = (b?, part);
+        for (out, fill_made) in fills.into_iter().flatten() {
+            made += fill_made;
+            match out {
+                Ok((o, fp)) if key(&o) < key(&best.0) => best = (o, fp),
+                Ok(_) | Err(ApproxError::Unrealisable(_)) => {}
+                Err(e) => return Err(e),
+            }
         }
+        Ok((best.0, best.1, made))
     };
     let tries = opts.tries.max(1);
     // The draws are independent (each only reads the smoothed surface). They are made in
@@ -833,10 +839,13 @@ fn partition(
 }
 
 /// `part` with the budget its corner merges left spent as VSA spends it (its incremental
-/// insertion, [`lloyd::fill`]: the region of largest L2,1 error halved until K regions,
-/// each halving relaxed within the region), settled as [`partition`] settles its own; `None`
-/// when nothing could be added. The rest of the partition is left as it is (a relaxation
-/// of the whole on the input's normals would undo the smoothed clustering's regions).
+/// insertion, [`lloyd::fill`]: the region of largest L2,1 error halved until K regions),
+/// settled as [`partition`] settles its own; `None` when nothing could be added. The error is
+/// the input's normals' (`by_input`: the smoothing flattened what the clustering could not
+/// see — a curved face left as one region has one smoothed normal, no L2,1 error and no place
+/// to cut) or the smoothed ones' (the clustering's own signal, then relaxed as a whole as
+/// [`partition`] relaxes it; a relaxation on the input's normals would undo the smoothed
+/// clustering's regions, so there each halving is relaxed within its region only).
 ///
 /// Why: a region the corner merges made may be realisable as two once its planes are fitted
 /// anew; whether it is, only the realisation tells — so this is a further candidate, kept
@@ -847,30 +856,37 @@ fn filled(
     opts: &ApproxOptions,
     smoothed: &Smoothed,
     part: &Partitioned,
+    by_input: bool,
 ) -> Option<Partitioned> {
     let t = Instant::now();
-    // The input's normals, not the smoothed ones: the smoothing flattened what the clustering
-    // could not see (a curved face left as one region has one smoothed normal, no L2,1 error
-    // and no place to cut); the error the budget should lower is the input's.
-    let metric = lloyd::Normals {
-        normals: &smoothed.n0,
-        areas: &smoothed.a0,
+    let metric = if by_input {
+        lloyd::Normals {
+            normals: &smoothed.n0,
+            areas: &smoothed.a0,
+        }
+    } else {
+        lloyd::Normals {
+            normals: &smoothed.sm.normals,
+            areas: &smoothed.a1,
+        }
     };
     let mut labels = part.labels.clone();
     let worth = |labels: &[u32], c, new| surface.adds_a_plane(labels, c, new);
-    if lloyd::fill(
-        surface.topo,
-        &metric,
-        &mut labels,
-        part.n,
-        opts.k,
-        10,
-        worth,
-    ) == part.n
-    {
+    let topo = surface.topo;
+    if lloyd::fill(topo, &metric, &mut labels, part.n, opts.k, 10, worth) == part.n {
         return None;
     }
-    let mut filled = settle(mesh, surface, smoothed, labels, part.facts.clone(), t);
+    let mut facts = part.facts.clone();
+    if !by_input {
+        facts.lloyd_rounds += lloyd::relax(
+            topo,
+            &smoothed.sm.normals,
+            &smoothed.a1,
+            &mut labels,
+            opts.lloyd_rounds,
+        );
+    }
+    let mut filled = settle(mesh, surface, smoothed, labels, facts, t);
     filled.seconds += part.seconds;
     Some(filled)
 }
@@ -1503,7 +1519,25 @@ mod tests {
             Instant::now(),
         );
         assert_eq!(part.n, 1);
-        let filled = filled(&mesh, &surface, &ApproxOptions::new(2), &smoothed, &part).unwrap();
+        let by_input = filled(
+            &mesh,
+            &surface,
+            &ApproxOptions::new(2),
+            &smoothed,
+            &part,
+            true,
+        );
+        // By the smoothed normals there is nothing to cut.
+        assert!(filled(
+            &mesh,
+            &surface,
+            &ApproxOptions::new(2),
+            &smoothed,
+            &part,
+            false
+        )
+        .is_none());
+        let filled = by_input.unwrap();
         assert_eq!(filled.n, 2);
         // Faces 0..8 are left of the ridge (x ≤ 4), 8..16 right of it.
         for f in 0..nf {

@@ -340,12 +340,14 @@ fn place(j: Junction, planes: &[Plane], x: V3) -> Option<V3> {
 }
 
 /// The corners of every vertex where regions meet (see the module doc); corners of one
-/// junction closer than `tol` are one.
+/// junction closer than `tol` are one. Only the vertices `on_loop` (on a region's boundary
+/// loop) are looked at: the others are inside a region.
 fn corners(
     s: &Surface<'_>,
     labels: &[u32],
     planes: &[Plane],
     size: &[f64],
+    on_loop: &[bool],
 ) -> Result<Corners, Defect> {
     let (pos, tol) = (s.pos, s.tol);
     let mut out = Corners {
@@ -360,7 +362,7 @@ fn corners(
     // visited on every build).
     let (mut seq, mut sorted, mut cycle, mut ids, mut cs) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for v in 0..s.topo.n_vertices as u32 {
+    for v in (0..s.topo.n_vertices as u32).filter(|&v| on_loop[v as usize]) {
         let (fs, border) = s.star(v);
         // Inside a region (most vertices): no corner.
         if fs.is_empty()
@@ -712,7 +714,13 @@ fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Resu
     // Corners closer than the tolerance are one point at the output's precision: at one
     // junction they are merged, at two they are a defect (two corners on one point pinch the
     // polygons between them).
-    let cs = corners(s, &regions.labels, planes, &size)?;
+    regions.trace_loops(s);
+    // Corners are only where regions meet or the surface ends: on the regions' boundary loops.
+    let mut on_loop = vec![false; s.topo.n_vertices];
+    for &v in regions.loops.iter().flatten().flatten().flatten() {
+        on_loop[v as usize] = true;
+    }
+    let cs = corners(s, &regions.labels, planes, &size, &on_loop)?;
     if let Some(d) = coincident(&cs, s.tol) {
         return Err(d);
     }
@@ -722,7 +730,6 @@ fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Resu
     };
     let mut tris: Vec<[u32; 3]> = Vec::new();
     let mut tri_region: Vec<u32> = Vec::new();
-    regions.trace_loops(s);
     for (r, region_loops) in regions.loops.iter().enumerate() {
         let r = r as u32;
         let region_loops = region_loops.as_deref().unwrap_or_default();
