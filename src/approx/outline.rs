@@ -841,6 +841,10 @@ struct Regions {
     boxes: Vec<[V3; 2]>,
     /// Each region's boundary loops ([`region_loops`]), once a build has traced them.
     loops: Vec<Option<Vec<Vec<u32>>>>,
+    /// The faces (ascending) of every region without loops, when the last update found them
+    /// (it passes over the faces of the regions it sums afresh, the same regions): the
+    /// tracing then looks at those faces only, not the whole mesh.
+    untraced_faces: Option<Vec<u32>>,
 }
 
 impl Regions {
@@ -903,12 +907,14 @@ impl Regions {
                 }
             })
             .collect();
+        let mut untraced = Vec::new();
         if (0..n).any(|b| !kept(b)) {
             for (f, &r) in labels.iter().enumerate() {
                 let r = r as usize;
                 if kept(r) {
                     continue;
                 }
+                untraced.push(f as u32);
                 moments[r] = moments[r].add(&s.moments[f]);
                 let (bx, fb) = (&mut boxes[r], &s.face_box[f]);
                 for k in 0..3 {
@@ -941,6 +947,10 @@ impl Regions {
                 }
             })
             .collect();
+        // A kept region without loops (not traced since an earlier update) is not among them.
+        self.untraced_faces = (0..n)
+            .all(|b| !kept(b) || self.loops[b].is_some())
+            .then_some(untraced);
         self.moments = moments;
         self.boxes = boxes;
         self.labels.clear();
@@ -954,7 +964,15 @@ impl Regions {
         if !want.contains(&true) {
             return;
         }
-        let traced = region_loops(s.topo, s.faces, &self.labels, want.len(), &want);
+        let among = self.untraced_faces.take();
+        let traced = region_loops(
+            s.topo,
+            s.faces,
+            &self.labels,
+            want.len(),
+            &want,
+            among.as_deref(),
+        );
         for ((cached, loops), want) in self.loops.iter_mut().zip(traced).zip(want) {
             if want {
                 *cached = Some(loops);
@@ -1846,7 +1864,7 @@ mod tests {
                     .collect();
                 assert_eq!(regions.sizes(), sizes);
                 regions.trace_loops(s);
-                let traced = region_loops(s.topo, s.faces, labels, n, &vec![true; n]);
+                let traced = region_loops(s.topo, s.faces, labels, n, &vec![true; n], None);
                 for (r, loops) in traced.iter().enumerate() {
                     assert_eq!(regions.loops[r].as_ref(), Some(loops), "region {r}'s loops");
                 }

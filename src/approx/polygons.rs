@@ -88,25 +88,32 @@ pub(super) fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2])
 /// normal for the outer loop, clockwise for holes), of the regions `want`s (the others'
 /// lists are left empty). Each region's loops start at its boundary vertices in increasing
 /// order; where a region leaves a vertex by several boundary half-edges, the one of the
-/// latest face goes first. A region's loops depend on its set of faces alone.
+/// latest face goes first. A region's loops depend on its set of faces alone. `among`, when
+/// given, lists (ascending) every face of the wanted regions, and only those are looked at.
 pub(super) fn region_loops(
     topo: &Topology,
     faces: &[[u32; 3]],
     fc: &[u32],
     n: usize,
     want: &[bool],
+    among: Option<&[u32]>,
 ) -> Vec<Vec<Vec<u32>>> {
     // The boundary half-edges (region, from, to) in face order.
     let mut half: Vec<(u32, u32, u32)> = Vec::new();
-    for ((f, face), across) in faces.iter().enumerate().zip(&topo.face_faces) {
+    let mut visit = |f: usize| {
         if !want[fc[f] as usize] {
-            continue;
+            return;
         }
-        for (k, &g) in across.iter().enumerate() {
+        let face = &faces[f];
+        for (k, &g) in topo.face_faces[f].iter().enumerate() {
             if g == NO_FACE || fc[g as usize] != fc[f] {
                 half.push((fc[f], face[k], face[(k + 1) % 3]));
             }
         }
+    };
+    match among {
+        Some(listed) => listed.iter().for_each(|&f| visit(f as usize)),
+        None => (0..faces.len()).for_each(visit),
     }
     // Grouped by source vertex, face order kept within a group (a stable sort).
     let mut by_source: Vec<u32> = (0..half.len() as u32).collect();
