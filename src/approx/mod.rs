@@ -859,17 +859,12 @@ fn filled(
     by_input: bool,
 ) -> Option<Partitioned> {
     let t = Instant::now();
-    let metric = if by_input {
-        lloyd::Normals {
-            normals: &smoothed.n0,
-            areas: &smoothed.a0,
-        }
+    let (normals, areas): (&[V3], &[f64]) = if by_input {
+        (&smoothed.n0, &smoothed.a0)
     } else {
-        lloyd::Normals {
-            normals: &smoothed.sm.normals,
-            areas: &smoothed.a1,
-        }
+        (&smoothed.sm.normals, &smoothed.a1)
     };
+    let metric = lloyd::Normals { normals, areas };
     let mut labels = part.labels.clone();
     let worth = |labels: &[u32], c, new| surface.adds_a_plane(labels, c, new);
     let topo = surface.topo;
@@ -878,13 +873,7 @@ fn filled(
     }
     let mut facts = part.facts.clone();
     if !by_input {
-        facts.lloyd_rounds += lloyd::relax(
-            topo,
-            &smoothed.sm.normals,
-            &smoothed.a1,
-            &mut labels,
-            opts.lloyd_rounds,
-        );
+        facts.lloyd_rounds += lloyd::relax(topo, normals, areas, &mut labels, opts.lloyd_rounds);
     }
     let mut filled = settle(mesh, surface, smoothed, labels, facts, t);
     filled.seconds += part.seconds;
@@ -1484,10 +1473,6 @@ mod tests {
         }
     }
 
-    /// One region over a grid bent in x (`z = (x − ½)²`): its vertices' heights spread
-    /// unevenly (the median of `(x − ½)²` over a uniform x is 1/16, its mean 1/12), so the
-    /// least-absolute-distances plane is the level plane at the median height, nearer the
-    /// input than the least-squares one, and the polygon built on it is the whole border.
     /// A roof the smoothing flattened (one smoothed normal on both sides: no L2,1 error, no
     /// place to cut by) is still halved at its ridge when the budget is filled: the fill
     /// measures the input's normals.
@@ -1496,65 +1481,53 @@ mod tests {
         let (mesh, topo) = testing::roof(8, 4);
         let (n0, a0) = face_normals_areas(&mesh.positions, &mesh.faces);
         let nf = mesh.faces.len();
+        let normals = vec![[0.0, 0.0, 1.0]; nf];
+        let sm = normals_l0::NormalL0Result {
+            normals,
+            crease_edges: 0,
+            rounds: 0,
+        };
+        let (n, a) = (n0.clone(), a0.clone());
         let smoothed = Smoothed {
-            n0: n0.clone(),
-            a0: a0.clone(),
-            sm: normals_l0::NormalL0Result {
-                normals: vec![[0.0, 0.0, 1.0]; nf],
-                crease_edges: 0,
-                rounds: 0,
-            },
+            n0: n,
+            a0: a,
+            sm,
             a1: a0.clone(),
             seconds_normals: 0.0,
             seconds_vertices: 0.0,
         };
         let surface = outline::Surface::new(&topo, &mesh, &n0, &a0);
-        let whole = vec![0; nf];
+        let t = Instant::now();
         let part = settle(
             &mesh,
             &surface,
             &smoothed,
-            whole,
+            vec![0; nf],
             Default::default(),
-            Instant::now(),
+            t,
         );
         assert_eq!(part.n, 1);
-        let by_input = filled(
-            &mesh,
-            &surface,
-            &ApproxOptions::new(2),
-            &smoothed,
-            &part,
-            true,
-        );
+        let o = ApproxOptions::new(2);
+        let fill = |by_input| filled(&mesh, &surface, &o, &smoothed, &part, by_input);
         // By the smoothed normals there is nothing to cut.
-        assert!(filled(
-            &mesh,
-            &surface,
-            &ApproxOptions::new(2),
-            &smoothed,
-            &part,
-            false
-        )
-        .is_none());
-        let filled = by_input.unwrap();
+        assert!(fill(false).is_none());
+        let filled = fill(true).unwrap();
         assert_eq!(filled.n, 2);
         // Faces 0..8 are left of the ridge (x ≤ 4), 8..16 right of it.
-        for f in 0..nf {
-            assert_eq!(
-                filled.labels[f] == filled.labels[0],
-                f < 8,
-                "{:?}",
-                filled.labels
-            );
-        }
-        assert!(
-            filled.error < 1e-12 * geom::bbox_diagonal(&mesh),
-            "{}",
-            filled.error
-        );
+        let left: Vec<bool> = filled
+            .labels
+            .iter()
+            .map(|&l| l == filled.labels[0])
+            .collect();
+        assert_eq!(left, (0..nf).map(|f| f < 8).collect::<Vec<_>>());
+        let diag = geom::bbox_diagonal(&mesh);
+        assert!(filled.error < 1e-12 * diag, "{}", filled.error);
     }
 
+    /// One region over a grid bent in x (`z = (x − ½)²`): its vertices' heights spread
+    /// unevenly (the median of `(x − ½)²` over a uniform x is 1/16, its mean 1/12), so the
+    /// least-absolute-distances plane is the level plane at the median height, nearer the
+    /// input than the least-squares one, and the polygon built on it is the whole border.
     #[test]
     fn refit_moves_a_curved_region_to_its_median_plane_and_keeps_the_mesh_valid() {
         let (positions, faces) = crate::init::test_grid::bumpy(40, |x, _| (x - 0.5).powi(2));
