@@ -859,12 +859,14 @@ fn filled(
     by_input: bool,
 ) -> Option<Partitioned> {
     let t = Instant::now();
-    let (normals, areas): (&[V3], &[f64]) = if by_input {
-        (&smoothed.n0, &smoothed.a0)
+    let metric = if by_input {
+        surface.normals_metric()
     } else {
-        (&smoothed.sm.normals, &smoothed.a1)
+        lloyd::Normals {
+            normals: &smoothed.sm.normals,
+            areas: &smoothed.a1,
+        }
     };
-    let metric = lloyd::Normals { normals, areas };
     let mut labels = part.labels.clone();
     let worth = |labels: &[u32], c, new| surface.adds_a_plane(labels, c, new);
     let topo = surface.topo;
@@ -873,6 +875,7 @@ fn filled(
     }
     let mut facts = part.facts.clone();
     if !by_input {
+        let (normals, areas) = (metric.normals, metric.areas);
         facts.lloyd_rounds += lloyd::relax(topo, normals, areas, &mut labels, opts.lloyd_rounds);
     }
     let mut filled = settle(mesh, surface, smoothed, labels, facts, t);
@@ -1487,10 +1490,9 @@ mod tests {
             crease_edges: 0,
             rounds: 0,
         };
-        let (n, a) = (n0.clone(), a0.clone());
         let smoothed = Smoothed {
-            n0: n,
-            a0: a,
+            n0: n0.clone(),
+            a0: a0.clone(),
             sm,
             a1: a0.clone(),
             seconds_normals: 0.0,

@@ -363,14 +363,9 @@ fn corners(
     let (mut seq, mut sorted, mut cycle, mut ids, mut cs) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for v in (0..s.topo.n_vertices as u32).filter(|&v| on_loop[v as usize]) {
+        // A vertex on a boundary loop is on the border or has two regions around it.
         let (fs, border) = s.star(v);
-        // Inside a region (most vertices): no corner.
-        if fs.is_empty()
-            || (!border
-                && fs
-                    .iter()
-                    .all(|&f| labels[f as usize] == labels[fs[0] as usize]))
-        {
+        if fs.is_empty() {
             continue;
         }
         // Regions in counter-clockwise order, runs collapsed.
@@ -1339,7 +1334,7 @@ impl<'a> Surface<'a> {
     }
 
     /// VSA's L2,1 metric on the input's faces (what the realisation's splits follow).
-    fn normals_metric(&self) -> super::lloyd::Normals<'_> {
+    pub(super) fn normals_metric(&self) -> super::lloyd::Normals<'_> {
         super::lloyd::Normals {
             normals: self.normals,
             areas: self.areas,
