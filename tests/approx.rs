@@ -576,6 +576,33 @@ fn a_coin_is_realised_on_the_planes_its_faces_face() {
     assert_eq!(caps, 2, "{:?}", out.planes);
 }
 
+/// A run that lost its planes to merges says so, and only then: `block.obj` (tests/data) at
+/// K = 16 is realised only after merges that leave it more than a quarter farther from the
+/// input than the partition it realises; at K = 24 without a merge.
+#[test]
+fn a_run_that_lost_its_planes_to_merges_says_so() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/block.obj");
+    let (m, t, _) = foldfree::mesh::load(&path, &Default::default()).unwrap();
+    let lost = |k: usize| {
+        let r = approximate(&m, &t, &ApproxOptions::new(k), &mut |_| {})
+            .unwrap()
+            .report;
+        let said = r
+            .notes
+            .iter()
+            .any(|n| n.contains("farther from the input than the partition"));
+        assert_eq!(
+            said,
+            r.mean_input_distance > 1.25 * r.partition_mean_input_distance,
+            "K = {k}: {:?}",
+            r.notes
+        );
+        said
+    };
+    assert!(lost(16));
+    assert!(!lost(24));
+}
+
 /// Restarts: seeds after the tries are run only while no partition was realised; when none
 /// is, the error says which seeds were tried and nothing is returned. (A tube in two regions
 /// cannot be realised: the two halves' planes are parallel, and the tube in one region has an

@@ -423,6 +423,12 @@ fn best_run(
     })
 }
 
+/// Whether a realisation lost its planes to merges (a cascade): its mean distance to the
+/// input ends more than a quarter above that of the partition it was given.
+fn lost_planes(mean: f64, partition: f64) -> bool {
+    mean > 1.25 * partition
+}
+
 /// What one draw gives: its realisation and partition (or why it has none), and the
 /// realisations it made.
 type Drawn = (Result<(Run, Partitioned), ApproxError>, usize);
@@ -442,11 +448,13 @@ fn best_on(
     progress: &mut dyn FnMut(Stage),
 ) -> Result<ApproxOutput, ApproxError> {
     let bad = |o: &Run| o.report.flipped_faces + o.report.degenerate_faces;
-    // A realisation that ends more than a quarter farther from the input than the partition
-    // it was given has lost its planes to merges (a cascade); another seed's partition is an
-    // independent draw of that.
+    // Another seed's partition is an independent draw of a realisation that lost its planes.
     let done = |o: &Run| {
-        bad(o) == 0 && o.report.mean_input_distance <= 1.25 * o.report.partition_mean_input_distance
+        bad(o) == 0
+            && !lost_planes(
+                o.report.mean_input_distance,
+                o.report.partition_mean_input_distance,
+            )
     };
     // Fewest bad faces, then the smaller mean distance.
     let key = |o: &Run| (bad(o), o.report.mean_input_distance);
@@ -1219,6 +1227,16 @@ fn finish(
             r.merges,
             r.unpinched,
             r.defects.len()
+        ));
+    }
+    if lost_planes(mean, part.error) {
+        notes.push(format!(
+            "the polygon mesh is {:.1}× farther from the input than the partition it realises \
+             ({:.2e}·diag against {:.2e}·diag): the merges above took planes where the \
+             partition needed them (a larger K, or other seeds, may keep them)",
+            mean / part.error,
+            mean / diag,
+            part.error / diag
         ));
     }
     if surface.rule == PlaneRule::Facing {
