@@ -176,9 +176,19 @@ pub enum Defect {
         twice: u32,
         regions: Vec<u32>,
     },
-    /// A loop of the region has fewer than three corners.
-    #[error("a boundary loop of region {region} (ringed by regions {neighbors:?}) has fewer than three corners")]
+    /// A loop of the region has fewer than three corners (no neighbours: a loop along the
+    /// mesh's border).
+    #[error(
+        "a boundary loop of region {region} ({}) has fewer than three corners",
+        match neighbors.is_empty() {
+            true => "along the mesh's border".to_string(),
+            false => format!("ringed by regions {neighbors:?}"),
+        }
+    )]
     Loop { region: u32, neighbors: Vec<u32> },
+    /// The region is a whole closed component: a closed surface has no outline.
+    #[error("region {region} covers a whole closed component, which no planar polygon can")]
+    Closed { region: u32 },
     /// The region's outline crosses itself, or a hole lies outside it, in its plane; the
     /// regions placing the corners of the crossing edges (empty for a hole or orientation).
     #[error("the outline of region {region} crosses itself in its plane")]
@@ -203,6 +213,7 @@ impl Defect {
                 r.push(*region);
                 r
             }
+            Defect::Closed { region } => vec![*region],
             Defect::Outline { region, regions } if regions.is_empty() => vec![*region],
             Defect::Outline { regions, .. } => regions.clone(),
             Defect::Crossing { regions } => regions.to_vec(),
@@ -612,11 +623,7 @@ fn region_outlines(
         outlines.push(ol);
     }
     if outlines.is_empty() {
-        // A closed surface in one region has no outline.
-        return Err(Defect::Loop {
-            region: r,
-            neighbors: Vec::new(),
-        });
+        return Err(Defect::Closed { region: r });
     }
     Ok(outlines)
 }
@@ -1819,6 +1826,18 @@ mod tests {
         let (m, t, sides) = crate::approx::testing::cube(3);
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
         test(&Surface::new(&t, &m, &normals, &areas), &sides);
+    }
+
+    /// A closed surface in one region has no outline, and the defect says so (not "a loop
+    /// ringed by no region": it has no loop).
+    #[test]
+    fn a_closed_surface_in_one_region_is_named_as_such() {
+        on_cube(|s, _| {
+            let labels = vec![0; s.faces.len()];
+            let err = build(s, &labels, &fit_planes(s, &labels, 1)).err();
+            assert_eq!(err, Some(Defect::Closed { region: 0 }));
+            assert!(err.unwrap().to_string().contains("whole closed component"));
+        });
     }
 
     /// `Regions` kept across label changes gives exactly (bit for bit) what summing every
