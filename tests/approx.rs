@@ -730,8 +730,8 @@ fn moments_fit_planes_and_measure_a_merge() {
 }
 
 /// Validity first: a noisy cube given as one region (a closed surface, which no polygon can
-/// bound) is split until its planes realise it — the six sides, each a square sharing the
-/// cube's eight corners.
+/// bound: the first defect says so) is split until its planes realise it — the six sides,
+/// each a square sharing the cube's eight corners.
 #[test]
 fn outline_splits_an_unrealisable_partition_into_the_cube_sides() {
     let m = noisy_cube(6, 0.01, 21);
@@ -742,6 +742,8 @@ fn outline_splits_an_unrealisable_partition_into_the_cube_sides() {
     assert_eq!(r.planes.len(), 6);
     assert_eq!(r.merges, 0);
     assert!(r.splits >= 5 && !r.defects.is_empty());
+    assert_eq!(r.defects[0], outline::Defect::Closed { region: 0 });
+    assert!(r.defects[0].to_string().contains("whole closed component"));
     assert_eq!(r.polygons.positions.len(), 8);
     assert!(r.polygons.polygons.iter().all(|p| p.len() == 4));
     assert_eq!(r.triangles.len(), 12);

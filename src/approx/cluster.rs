@@ -102,21 +102,7 @@ pub fn cluster_faces(
     let max_cone = opts.max_cone_deg.to_radians();
     let total_area: f64 = area.iter().sum();
 
-    // Region adjacency and whether a region touches the mesh boundary.
-    let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); grown];
-    let mut open = vec![false; grown];
-    for ef in &topo.edge_faces {
-        let a = label[ef[0] as usize];
-        if ef[1] == NO_FACE {
-            open[a as usize] = true;
-            continue;
-        }
-        let b = label[ef[1] as usize];
-        if a != b {
-            adj[a as usize].insert(b);
-            adj[b as usize].insert(a);
-        }
-    }
+    let (mut adj, mut open) = region_adjacency(topo, &label, grown);
     let mut parent: Vec<u32> = (0..grown as u32).collect();
     let mut alive = vec![true; grown];
     let mut n_alive = grown;
@@ -546,6 +532,26 @@ pub fn merge_unreachable_corners(
     merges
 }
 
+/// Each region's neighbours (regions across an edge) and whether it touches the mesh's
+/// border, for `labels` numbered `0..n`.
+fn region_adjacency(topo: &Topology, labels: &[u32], n: usize) -> (Vec<BTreeSet<u32>>, Vec<bool>) {
+    let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); n];
+    let mut open = vec![false; n];
+    for ef in &topo.edge_faces {
+        let a = labels[ef[0] as usize];
+        if ef[1] == NO_FACE {
+            open[a as usize] = true;
+            continue;
+        }
+        let b = labels[ef[1] as usize];
+        if a != b {
+            adj[a as usize].insert(b);
+            adj[b as usize].insert(a);
+        }
+    }
+    (adj, open)
+}
+
 /// Merges closed regions with fewer than three neighbouring regions (their whole boundary would
 /// lie on one or two plane–plane lines and collapse) into their closest neighbour, at face
 /// level, until none is left; needed again after merges made by later steps. Returns the
@@ -560,20 +566,7 @@ pub fn merge_collapsing_regions(
     for _ in 0..64 {
         let sums = region_normal_sums(face_cluster, normals, areas);
         let n = sums.len();
-        let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); n];
-        let mut open = vec![false; n];
-        for ef in &topo.edge_faces {
-            let a = face_cluster[ef[0] as usize];
-            if ef[1] == NO_FACE {
-                open[a as usize] = true;
-                continue;
-            }
-            let b = face_cluster[ef[1] as usize];
-            if a != b {
-                adj[a as usize].insert(b);
-                adj[b as usize].insert(a);
-            }
-        }
+        let (adj, open) = region_adjacency(topo, face_cluster, n);
         let bad: Vec<u32> = (0..n)
             .filter(|&c| !open[c] && !adj[c].is_empty() && adj[c].len() < 3)
             .map(|c| c as u32)

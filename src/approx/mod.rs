@@ -460,10 +460,9 @@ fn best_on(
     let key = |o: &Run| (bad(o), o.report.mean_input_distance);
     let mut best: Option<(Run, Partitioned)> = None;
     let mut unrealised: Option<ApproxError> = None;
-    let with_seed = |seed: u64| {
-        let mut sub = opts.clone();
-        sub.seed = seed;
-        sub
+    let with_seed = |seed: u64| ApproxOptions {
+        seed,
+        ..opts.clone()
     };
     // Giving a region away stops the cascade of merges that a region whose outline crosses
     // itself starts, but it can start one of its own: `o`'s partition realised with merges
