@@ -1231,8 +1231,8 @@ fn finish(
     if lost_planes(mean, part.error) {
         notes.push(format!(
             "the polygon mesh is {:.1}× farther from the input than the partition it realises \
-             ({:.2e}·diag against {:.2e}·diag): the merges above took planes where the \
-             partition needed them (a larger K, or other seeds, may keep them)",
+             ({:.2e}·diag against {:.2e}·diag): merges took planes where the partition \
+             needed them (a larger K, or other seeds, may keep them)",
             mean / part.error,
             mean / diag,
             part.error / diag

@@ -1534,9 +1534,10 @@ pub fn realise(
     // it lowers the residual at all.
     let before = n;
     let normals = s.normals_metric();
-    let spend = |regions: &mut Regions, labels: &mut Vec<u32>, n: &mut usize, un, keep| {
-        spend_budget(s, regions, labels, n, k, un, keep, &normals, stop)
-    };
+    let spend =
+        |regions: &mut Regions, labels: &mut Vec<u32>, n: &mut usize, unsplittable, keep| {
+            spend_budget(s, regions, labels, n, k, unsplittable, keep, &normals, stop)
+        };
     if let Some(b) = spend(&mut regions, &mut labels, &mut n, &mut unsplittable, 0.25) {
         (polygons, triangles, triangle_region) = b;
     }
