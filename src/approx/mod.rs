@@ -26,15 +26,15 @@
 //!    are nearer to (leaf faces, away from junctions, so the corners stay), the polygons built
 //!    again and the planes refitted (stage 5 again) — kept only if valid and nearer.
 //!
-//! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the valid polygon mesh
-//! nearest the input is kept. Its partition filled to K as VSA fills one ([`lloyd::fill`]) is
-//! realised too, once by the input's normals (the smoothing flattened what the clustering could
-//! not see) and once by the smoothed ones. Each of the three, if it has fewer than K regions,
-//! has the budget left go to halvings of its regions into the two planes that fit each best
-//! ([`outline::spend_on_two_planes`]), then stages 5–6 again, kept if nearer; the nearest
-//! finished mesh is kept. If no draw is realised, the tries are made again
-//! with each region on the principal plane its faces face ([`geom::PlaneRule::Facing`]: a thin
-//! bent region's least-squares plane lies across it). OUT.obj is the triangulation of the
+//! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the nearest valid polygon
+//! mesh is finished (each, if it lost its planes): its partition filled to K as VSA fills
+//! one ([`lloyd::fill`]) is realised too, once by the input's normals (the smoothing
+//! flattened what the clustering could not see) and once by the smoothed ones. Each of the
+//! three, if it has fewer than K regions, has the budget left go to halvings of its regions
+//! into the two planes that fit each best ([`outline::spend_on_two_planes`]), then stages 5–6
+//! again, kept if nearer; the nearest finished mesh is kept. If no draw is realised, the tries
+//! are made again with each region on the principal plane its faces face
+//! ([`geom::PlaneRule::Facing`]: a thin bent region's least-squares plane lies across it). OUT.obj is the triangulation of the
 //! polygons: the connectivity inside each region is new.
 #![forbid(unsafe_code)]
 
@@ -49,6 +49,7 @@ mod relabel;
 pub mod sparse;
 pub mod vertex_update;
 
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -458,7 +459,6 @@ fn best_on(
     };
     // Fewest bad faces, then the smaller mean distance.
     let key = |o: &Run| (bad(o), o.report.mean_input_distance);
-    let mut best: Option<(Run, Partitioned)> = None;
     let mut unrealised: Option<ApproxError> = None;
     let with_seed = |seed: u64| ApproxOptions {
         seed,
@@ -522,9 +522,9 @@ fn best_on(
     };
     // Budget a candidate left unused (no region's normal halving could be realised) goes to
     // two-plane halvings, then the planes are refitted and the borders relabelled again; kept
-    // if nearer. Made on the kept draw's candidates only (on every draw it would cost each
-    // one the phase), before they are compared: which is nearest is a property of the
-    // finished meshes, and a candidate with budget left may end nearer than one without.
+    // if nearer. Made on the finished draws' candidates only, before they are compared: which
+    // is nearest is a property of the finished meshes, and a candidate with budget left may
+    // end nearer than one without.
     let completed = |b: Run, part: &Partitioned| -> Run {
         if b.report.k_obtained >= opts.k {
             return b;
@@ -551,17 +551,16 @@ fn best_on(
             b
         }
     };
-    // Further candidates on the kept draw `(b, part)`, independent of each other (each reads
-    // only the kept draw's partition), so made in parallel; the nearest finished mesh is
-    // returned with the realisations made:
+    // A draw `(b, part)` finished: further candidates, independent of each other (each reads
+    // only its partition), so made in parallel; the nearest is returned with the realisations
+    // made:
     // - if it gave regions away with all K regions left, its partition realised with merges
     //   alone too;
     // - its partition with the budget its corner merges left spent ([`filled`]), once by the
     //   input's normals (the error measured) and once by the smoothed ones (the clustering's
-    //   signal: where the input is noisy, its cuts follow the shape), realised: made on the
-    //   kept draw only, as further candidates — they replace no draw, so no run ends farther
-    //   from the input for them.
-    let tail = |b: Run, part: Partitioned| -> Result<(Run, Partitioned, usize), ApproxError> {
+    //   signal: where the input is noisy, its cuts follow the shape), realised: further
+    //   candidates — they replace no draw, so no run ends farther from the input for them.
+    let tail = |b: Run, part: Partitioned| -> Result<(Run, usize), ApproxError> {
         let seed = b.report.seed_used;
         let dissolved = b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k;
         let first = || {
@@ -579,7 +578,7 @@ fn best_on(
             let fin = |fp: Option<Partitioned>| {
                 fp.map(|fp| {
                     let (out, made) = realised(seed, fp);
-                    (out.map(|(o, fp)| (completed(o, &fp), fp)), made)
+                    (out.map(|(o, fp)| completed(o, &fp)), made)
                 })
             };
             let (a, b) = rayon::join(|| fin(by_input), || fin(by_smoothed));
@@ -587,16 +586,16 @@ fn best_on(
         };
         let (b, fills) = rayon::join(first, fills);
         let mut made = usize::from(dissolved);
-        let mut best = (b?, part);
+        let mut best = b?;
         for (out, fill_made) in fills.into_iter().flatten() {
             made += fill_made;
             match out {
-                Ok((o, fp)) if key(&o) < key(&best.0) => best = (o, fp),
+                Ok(o) if key(&o) < key(&best) => best = o,
                 Ok(_) | Err(ApproxError::Unrealisable(_)) => {}
                 Err(e) => return Err(e),
             }
         }
-        Ok((best.0, best.1, made))
+        Ok((best, made))
     };
     let tries = opts.tries.max(1);
     // The draws are independent (each only reads the smoothed surface). They are made in
@@ -607,29 +606,26 @@ fn best_on(
     // The draws before the first wave end that can stop the search are made in any case, and
     // are made in parallel (rayon; results in seed order, whichever finishes first).
     let certain = (2 * tries.div_ceil(2)).min(last + 1);
-    // Each draw kept if nearest so far, in seed order (ties go to the earlier seed); whether
-    // one was.
-    let absorb = |best: &mut Option<(Run, Partitioned)>,
+    // Every draw realised, in seed order; the nearest (ties go to the earlier seed).
+    let mut drawn: Vec<(Run, Partitioned)> = Vec::new();
+    let nearest = |d: &[(Run, Partitioned)]| {
+        (0..d.len()).reduce(|a, b| if key(&d[b].0) < key(&d[a].0) { b } else { a })
+    };
+    let absorb = |drawn: &mut Vec<(Run, Partitioned)>,
                   unrealised: &mut Option<ApproxError>,
-                  drawn: Vec<Drawn>,
+                  made: Vec<Drawn>,
                   runs: &mut usize|
-     -> Result<bool, ApproxError> {
-        let mut replaced = false;
-        for (out, made) in drawn {
-            *runs += made;
+     -> Result<(), ApproxError> {
+        for (out, m) in made {
+            *runs += m;
             match out {
-                Ok((out, part)) => {
-                    if best.as_ref().is_none_or(|b| key(&out) < key(&b.0)) {
-                        *best = Some((out, part));
-                        replaced = true;
-                    }
-                }
+                Ok(d) => drawn.push(d),
                 // Another seed's partition may be realisable.
                 Err(e @ ApproxError::Unrealisable(_)) => *unrealised = Some(e),
                 Err(e) => return Err(e),
             }
         }
-        Ok(replaced)
+        Ok(())
     };
     let seed_of = |j: usize| opts.seed.wrapping_add(j as u64);
     let on_two = |from: usize, to: usize, progress: &mut dyn FnMut(Stage)| {
@@ -637,60 +633,61 @@ fn best_on(
             vec![draw(seed_of(from), progress)]
         } else {
             progress(Stage::Cluster);
-            use rayon::prelude::*;
             (from..to)
                 .into_par_iter()
                 .map(|j| draw(seed_of(j), &mut |_| {}))
                 .collect()
         }
     };
-    absorb(
-        &mut best,
-        &mut unrealised,
-        on_two(0, certain, progress),
-        runs,
-    )?;
-    // Two further candidates on the kept draw (`tail`); when the last wave is one draw, they
-    // are made for the nearest draw so far beside it, and kept unless that draw is nearer.
-    let mut tail_made: Option<Result<(Run, Partitioned, usize), ApproxError>> = None;
+    let first = on_two(0, certain, progress);
+    absorb(&mut drawn, &mut unrealised, first, runs)?;
+    // When the last wave is one draw, the nearest draw so far is finished (`tail`) beside it
+    // (the draw's seed and its tail): used if that draw is one of those finished below.
+    let mut speculated = None;
     let mut i = certain;
-    while i <= last && !best.as_ref().is_some_and(|b| done(&b.0)) {
+    while i <= last && !nearest(&drawn).is_some_and(|b| done(&drawn[b].0)) {
         let wave = (last + 1 - i).min(2);
-        let replaced = match best.as_ref() {
-            Some((b, part)) if i == last => {
-                let (b, part) = (b.clone(), part.clone());
+        let made = match nearest(&drawn) {
+            Some(b) if i == last => {
+                let (run, part) = drawn[b].clone();
                 progress(Stage::Cluster);
-                let (d, speculated) =
-                    rayon::join(|| draw(seed_of(i), &mut |_| {}), || tail(b, part));
-                tail_made = Some(speculated);
-                absorb(&mut best, &mut unrealised, vec![d], runs)?
+                let seed = run.report.seed_used;
+                let (d, t) = rayon::join(|| draw(seed_of(i), &mut |_| {}), || tail(run, part));
+                speculated = Some((seed, t));
+                vec![d]
             }
-            _ => absorb(
-                &mut best,
-                &mut unrealised,
-                on_two(i, i + wave, progress),
-                runs,
-            )?,
+            _ => on_two(i, i + wave, progress),
         };
-        if replaced {
-            // Made for a draw no longer the nearest: neither kept nor counted (`runs` counts
-            // the realisations the search uses, as made one after another).
-            tail_made = None;
-        }
+        absorb(&mut drawn, &mut unrealised, made, runs)?;
         i += wave;
     }
-    if let Some((b, part)) = best.take() {
-        let (b, part, made) = match tail_made {
-            Some(t) => t?,
-            None => tail(b, part)?,
-        };
-        *runs += made;
-        best = Some((b, part));
-    }
     // Unrealisable: the last draw's defect (the caller says which draws failed).
-    let Some((mut best, _)) = best else {
+    let Some(b) = nearest(&drawn) else {
         return Err(unrealised.unwrap_or(ApproxError::Unrealisable(String::new())));
     };
+    // The nearest draw finished, or every draw where the nearest lost its planes: the tail
+    // changes the ranking most where merges took planes (its fills win them back), so the
+    // nearest unfinished draw says little about the nearest finished one then (BENCHMARKS,
+    // planar approximation round 25). At most `last + 1` tails, on such runs only.
+    if done(&drawn[b].0) {
+        drawn = vec![drawn.swap_remove(b)];
+    }
+    let tails: Vec<_> = drawn
+        .into_iter()
+        .map(|d| (speculated.take_if(|s| s.0 == d.0.report.seed_used), d))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|(s, (run, part))| s.map_or_else(|| tail(run, part), |(_, t)| t))
+        .collect();
+    let mut best: Option<Run> = None;
+    for t in tails {
+        let (run, made) = t?;
+        *runs += made;
+        if best.as_ref().is_none_or(|b| key(&run) < key(b)) {
+            best = Some(run);
+        }
+    }
+    let mut best = best.expect("at least one draw was finished");
     best.report.runs = *runs;
     best.report.seconds_all_runs = t.elapsed().as_secs_f64();
     Ok(best.into())
