@@ -34,8 +34,8 @@
 //! into the two planes that fit each best ([`outline::spend_on_two_planes`]), then stages 5–6
 //! again, kept if nearer; the nearest finished mesh is kept. If no draw is realised, the tries
 //! are made again with each region on the principal plane its faces face
-//! ([`geom::PlaneRule::Facing`]: a thin bent region's least-squares plane lies across it). OUT.obj is the triangulation of the
-//! polygons: the connectivity inside each region is new.
+//! ([`geom::PlaneRule::Facing`]: a thin bent region's least-squares plane lies across it).
+//! OUT.obj is the triangulation of the polygons: the connectivity inside each region is new.
 #![forbid(unsafe_code)]
 
 pub mod cluster;
