@@ -27,8 +27,8 @@
 //!    again and the planes refitted (stage 5 again) — kept only if valid and nearer.
 //!
 //! Several seeds are tried (`ApproxOptions::tries`, `restarts`); the nearest valid polygon
-//! mesh is finished (each, if it lost its planes): its partition filled to K as VSA fills
-//! one ([`lloyd::fill`]) is realised too, once by the input's normals (the smoothing
+//! mesh is finished (every one, where that lost its planes): its partition filled to K as
+//! VSA fills one ([`lloyd::fill`]) is realised too, once by the input's normals (the smoothing
 //! flattened what the clustering could not see) and once by the smoothed ones. Each of the
 //! three, if it has fewer than K regions, has the budget left go to halvings of its regions
 //! into the two planes that fit each best ([`outline::spend_on_two_planes`]), then stages 5–6
@@ -606,11 +606,16 @@ fn best_on(
     // The draws before the first wave end that can stop the search are made in any case, and
     // are made in parallel (rayon; results in seed order, whichever finishes first).
     let certain = (2 * tries.div_ceil(2)).min(last + 1);
-    // Every draw realised, in seed order; the nearest (ties go to the earlier seed).
+    // Every draw realised, in seed order. The index of the nearest of runs given by their
+    // keys (ties go to the earlier seed), for the draws and the finished meshes alike.
     let mut drawn: Vec<(Run, Partitioned)> = Vec::new();
-    let nearest = |d: &[(Run, Partitioned)]| {
-        (0..d.len()).reduce(|a, b| if key(&d[b].0) < key(&d[a].0) { b } else { a })
+    let nearest = |keys: &mut dyn Iterator<Item = (usize, f64)>| {
+        let i = keys
+            .enumerate()
+            .reduce(|a, b| if b.1 < a.1 { b } else { a });
+        i.map(|(i, _)| i)
     };
+    let nearest_draw = |d: &[(Run, Partitioned)]| nearest(&mut d.iter().map(|d| key(&d.0)));
     let absorb = |drawn: &mut Vec<(Run, Partitioned)>,
                   unrealised: &mut Option<ApproxError>,
                   made: Vec<Drawn>,
@@ -645,9 +650,9 @@ fn best_on(
     // (the draw's seed and its tail): used if that draw is one of those finished below.
     let mut speculated = None;
     let mut i = certain;
-    while i <= last && !nearest(&drawn).is_some_and(|b| done(&drawn[b].0)) {
+    while i <= last && !nearest_draw(&drawn).is_some_and(|b| done(&drawn[b].0)) {
         let wave = (last + 1 - i).min(2);
-        let made = match nearest(&drawn) {
+        let made = match nearest_draw(&drawn) {
             Some(b) if i == last => {
                 let (run, part) = drawn[b].clone();
                 progress(Stage::Cluster);
@@ -661,15 +666,11 @@ fn best_on(
         absorb(&mut drawn, &mut unrealised, made, runs)?;
         i += wave;
     }
-    // Unrealisable: the last draw's defect (the caller says which draws failed).
-    let Some(b) = nearest(&drawn) else {
-        return Err(unrealised.unwrap_or(ApproxError::Unrealisable(String::new())));
-    };
     // The nearest draw finished, or every draw where the nearest lost its planes: the tail
     // changes the ranking most where merges took planes (its fills win them back), so the
     // nearest unfinished draw says little about the nearest finished one then (BENCHMARKS,
     // planar approximation round 25). At most `last + 1` tails, on such runs only.
-    if done(&drawn[b].0) {
+    if let Some(b) = nearest_draw(&drawn).filter(|&b| done(&drawn[b].0)) {
         drawn = vec![drawn.swap_remove(b)];
     }
     let tails: Vec<_> = drawn
@@ -679,15 +680,17 @@ fn best_on(
         .into_par_iter()
         .map(|(s, (run, part))| s.map_or_else(|| tail(run, part), |(_, t)| t))
         .collect();
-    let mut best: Option<Run> = None;
+    let mut finished = Vec::with_capacity(tails.len());
     for t in tails {
         let (run, made) = t?;
         *runs += made;
-        if best.as_ref().is_none_or(|b| key(&run) < key(b)) {
-            best = Some(run);
-        }
+        finished.push(run);
     }
-    let mut best = best.expect("at least one draw was finished");
+    // Unrealisable: the last draw's defect (the caller says which draws failed).
+    let Some(b) = nearest(&mut finished.iter().map(key)) else {
+        return Err(unrealised.unwrap_or(ApproxError::Unrealisable(String::new())));
+    };
+    let mut best = finished.swap_remove(b);
     best.report.runs = *runs;
     best.report.seconds_all_runs = t.elapsed().as_secs_f64();
     Ok(best.into())
