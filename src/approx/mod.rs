@@ -145,17 +145,12 @@ impl ApproxOptions {
                 self.angle_deg
             )));
         }
-        if self.tries > 100 {
-            return Err(ApproxError::BadInput(format!(
-                "option tries = {} is outside its range [0, 100]",
-                self.tries
-            )));
-        }
-        if self.restarts > 100 {
-            return Err(ApproxError::BadInput(format!(
-                "option restarts = {} is outside its range [0, 100]",
-                self.restarts
-            )));
+        for (name, v) in [("tries", self.tries), ("restarts", self.restarts)] {
+            if v > 100 {
+                return Err(ApproxError::BadInput(format!(
+                    "option {name} = {v} is outside its range [0, 100]"
+                )));
+            }
         }
         Ok(())
     }
@@ -534,17 +529,8 @@ fn best_on(
         if outline::spend_on_two_planes(surface, &mut r, opts.k) == 0 {
             return b;
         }
-        let sub = with_seed(b.report.seed_used);
-        let halved = finish(
-            mesh,
-            surface,
-            &sub,
-            smoothed,
-            part,
-            r,
-            t,
-            b.report.seconds.polygons,
-        );
+        let (sub, polygons) = (with_seed(b.report.seed_used), b.report.seconds.polygons);
+        let halved = finish(mesh, surface, &sub, smoothed, part, r, t, polygons);
         if key(&halved) < key(&b) {
             halved
         } else {
@@ -1210,13 +1196,9 @@ fn finish(
     let degenerate = bad.len() - flipped;
     let mut notes = Vec::new();
     if r.merges > 0 {
-        let given = if r.dissolved > 0 {
-            format!(
-                " ({} of them regions given away to their neighbours)",
-                r.dissolved
-            )
-        } else {
-            String::new()
+        let given = match r.dissolved {
+            0 => String::new(),
+            d => format!(" ({d} of them regions given away to their neighbours)"),
         };
         notes.push(format!(
             "{} regions (K = {}): {} splits, {} merges{given} and {} wedges moved answered {} partitions the planes could not realise",

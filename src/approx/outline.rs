@@ -885,23 +885,13 @@ impl Regions {
         }
         let empty = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
         let kept = |b: usize| from[b] < MANY;
+        // The old region new region `b` keeps.
+        let old = |b: usize| kept(b).then_some(from[b] as usize);
         let mut moments: Vec<Moments> = (0..n)
-            .map(|b| {
-                if kept(b) {
-                    self.moments[from[b] as usize]
-                } else {
-                    Moments::default()
-                }
-            })
+            .map(|b| old(b).map_or(Moments::default(), |a| self.moments[a]))
             .collect();
         let mut boxes: Vec<[V3; 2]> = (0..n)
-            .map(|b| {
-                if kept(b) {
-                    self.boxes[from[b] as usize]
-                } else {
-                    empty
-                }
-            })
+            .map(|b| old(b).map_or(empty, |a| self.boxes[a]))
             .collect();
         let mut untraced = Vec::new();
         if (0..n).any(|b| !kept(b)) {
@@ -914,34 +904,18 @@ impl Regions {
                 moments[r] = moments[r].add(&s.moments[f]);
                 let (bx, fb) = (&mut boxes[r], &s.face_box[f]);
                 for k in 0..3 {
-                    if fb[0][k] < bx[0][k] {
-                        bx[0][k] = fb[0][k];
-                    }
-                    if fb[1][k] > bx[1][k] {
-                        bx[1][k] = fb[1][k];
-                    }
+                    bx[0][k] = bx[0][k].min(fb[0][k]);
+                    bx[1][k] = bx[1][k].max(fb[1][k]);
                 }
             }
         }
         self.fit = (0..n)
-            .map(|b| {
-                if kept(b) {
-                    self.fit[from[b] as usize]
-                } else {
-                    fit_or_flat(&moments[b], s.rule)
-                }
-            })
+            .map(|b| old(b).map_or_else(|| fit_or_flat(&moments[b], s.rule), |a| self.fit[a]))
             .collect();
         let mut old_loops = std::mem::take(&mut self.loops);
         old_loops.resize(self.moments.len(), None);
         self.loops = (0..n)
-            .map(|b| {
-                if kept(b) {
-                    old_loops[from[b] as usize].take()
-                } else {
-                    None
-                }
-            })
+            .map(|b| old(b).and_then(|a| old_loops[a].take()))
             .collect();
         // A kept region without loops (not traced since an earlier update) is not among them.
         self.untraced_faces = (0..n)
@@ -1304,15 +1278,8 @@ impl<'a> Surface<'a> {
     /// Splits region `r` of `labels` in two, the new half labelled `n` (Lloyd, 10 rounds;
     /// [`super::lloyd::halve`] under [`super::lloyd::Normals`]). False when it cannot be halved.
     fn split(&self, labels: &mut [u32], r: u32, n: usize) -> bool {
-        super::lloyd::halve(
-            self.topo,
-            &self.normals_metric(),
-            labels,
-            r,
-            n as u32,
-            10,
-            0,
-        )
+        let metric = self.normals_metric();
+        super::lloyd::halve(self.topo, &metric, labels, r, n as u32, 10, 0)
     }
 
     /// Whether regions `a` and `b` of `labels` (a region just halved) fit two planes better
@@ -1664,16 +1631,8 @@ fn spend_budget<M: super::lloyd::Metric>(
         };
         let was = fits.fit[worst].1;
         let tried = (0..M::AXES).find_map(|axis| {
-            let mut trial = labels.clone();
-            if !super::lloyd::halve(
-                s.topo,
-                metric,
-                &mut trial,
-                worst as u32,
-                *n as u32,
-                10,
-                axis,
-            ) {
+            let (mut trial, c, new) = (labels.clone(), worst as u32, *n as u32);
+            if !super::lloyd::halve(s.topo, metric, &mut trial, c, new, 10, axis) {
                 return None;
             }
             regions.update(s, &trial, *n + 1);
