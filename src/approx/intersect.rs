@@ -231,7 +231,7 @@ mod tests {
     /// A triangle sharing a corner with another, its second corner on the other's plane and
     /// inside it, its third off the plane: their interiors meet along the edge between the
     /// first two, which no sign test sees (the orientation at the second corner is zero).
-    /// Found; a corner on the plane outside the other is not. (Met on cgal_turbine at K = 100
+    /// Found; a corner on the plane outside the other is not. (Met on a flanged tube at K = 100
     /// with a variant of the realisation, BENCHMARKS planar approximation round 26: a polygon
     /// mesh the independent check, benches/polycheck.py, found self-intersecting.)
     #[test]
