@@ -26,11 +26,13 @@ fn segment_crosses(p: V3, q: V3, t: [V3; 3]) -> bool {
     (s[0] > 0.0 && s[1] > 0.0 && s[2] > 0.0) || (s[0] < 0.0 && s[1] < 0.0 && s[2] < 0.0)
 }
 
-/// Whether every corner of `t` lies within `tol` of the plane of `on`.
-fn within(t: [V3; 3], on: [V3; 3], tol: f64) -> bool {
+/// The signed distances of the corners of `t` to the plane of `on`, those within `tol` put at
+/// 0 (on the plane at the output's precision); all 0 where `on` has no plane.
+fn distances(t: [V3; 3], on: [V3; 3], tol: f64) -> [f64; 3] {
     let n = cross(sub(on[1], on[0]), sub(on[2], on[0]));
     let len = dot(n, n).sqrt();
-    t.iter().all(|&p| dot(n, sub(p, on[0])).abs() <= tol * len)
+    t.map(|p| dot(n, sub(p, on[0])))
+        .map(|d| if d.abs() <= tol * len { 0.0 } else { d / len })
 }
 
 /// Whether triangles `a` and `b`, lying in one plane (normal `n`), overlap in their
@@ -68,21 +70,14 @@ fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
         || b.iter().any(|&i| !a.contains(&i) && inside(i, a))
 }
 
-/// Whether triangles `a` and `b` (not in one plane) meet beyond touching at the output's
-/// precision (Möller's interval test, corners within `tol` of the other's plane put on it);
-/// `None` unless a corner not shared is on the other's plane, where the orientations the sign
-/// tests of [`cross_pair`] rest on are zero up to rounding.
-fn overlap_on_common_line(pos: &[V3], a: [u32; 3], b: [u32; 3], tol: f64) -> Option<bool> {
-    let (ta, tb) = (a.map(|i| pos[i as usize]), b.map(|i| pos[i as usize]));
-    let unit = |t: [V3; 3]| normalize(cross(sub(t[1], t[0]), sub(t[2], t[0])));
-    let (na, nb) = (unit(ta)?, unit(tb)?);
-    let snap = |d: f64| if d.abs() > tol { d } else { 0.0 };
-    let da = ta.map(|p| snap(dot(nb, sub(p, tb[0]))));
-    let db = tb.map(|p| snap(dot(na, sub(p, ta[0]))));
-    let on =
-        |x: [u32; 3], d: [f64; 3], y: [u32; 3]| (0..3).any(|k| d[k] == 0.0 && !y.contains(&x[k]));
-    (on(a, da, b) || on(b, db, a)).then_some(())?;
-    let dir = normalize(cross(na, nb))?;
+/// Whether triangles `ta` and `tb` (not in one plane; `da`, `db` their corners' [`distances`]
+/// to each other's plane) meet beyond touching at the output's precision: Möller's interval
+/// test, their stretches of the planes' common line overlapping by more than `tol`.
+fn overlap_on_common_line(ta: [V3; 3], tb: [V3; 3], da: [f64; 3], db: [f64; 3], tol: f64) -> bool {
+    let normal = |t: [V3; 3]| cross(sub(t[1], t[0]), sub(t[2], t[0]));
+    let Some(dir) = normalize(cross(normal(ta), normal(tb))) else {
+        return false;
+    };
     let stretch = |t: [V3; 3], d: [f64; 3]| {
         let p = t.map(|v| dot(dir, v));
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -98,8 +93,10 @@ fn overlap_on_common_line(pos: &[V3], a: [u32; 3], b: [u32; 3], tol: f64) -> Opt
         }
         (lo <= hi).then_some((lo, hi))
     };
-    let (sa, sb) = (stretch(ta, da)?, stretch(tb, db)?);
-    Some(sa.1.min(sb.1) - sa.0.max(sb.0) > tol)
+    match (stretch(ta, da), stretch(tb, db)) {
+        (Some(a), Some(b)) => a.1.min(b.1) - a.0.max(b.0) > tol,
+        _ => false,
+    }
 }
 
 /// Whether triangles `a` and `b` (corner indices into `pos`) cross. Two that lie in one
@@ -112,10 +109,14 @@ fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3], tol: f64) -> bool {
     let shared: Vec<u32> = a.iter().copied().filter(|x| b.contains(x)).collect();
     let ta = a.map(|i| pos[i as usize]);
     let tb = b.map(|i| pos[i as usize]);
-    if within(tb, ta, tol) && within(ta, tb, tol) {
+    let (da, db) = (distances(ta, tb, tol), distances(tb, ta, tol));
+    if da.iter().chain(&db).all(|&d| d == 0.0) {
         return overlap_in_plane(pos, a, b, cross(sub(ta[1], ta[0]), sub(ta[2], ta[0])));
     }
-    if shared.len() < 2 && overlap_on_common_line(pos, a, b, tol) == Some(true) {
+    // A corner not shared on the other's plane: the orientations the sign tests below rest on
+    // are zero there up to rounding, so Möller's interval test decides too.
+    let on = |x: [u32; 3], d: [f64; 3]| (0..3).any(|k| d[k] == 0.0 && !shared.contains(&x[k]));
+    if shared.len() < 2 && (on(a, da) || on(b, db)) && overlap_on_common_line(ta, tb, da, db, tol) {
         return true;
     }
     let edges = |t: [u32; 3]| (0..3).map(move |k| (t[k], t[(k + 1) % 3]));

@@ -884,9 +884,8 @@ impl Regions {
             }
         }
         let empty = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
-        let kept = |b: usize| from[b] < MANY;
-        // The old region new region `b` keeps.
-        let old = |b: usize| kept(b).then_some(from[b] as usize);
+        // The old region whose values new region `b` keeps.
+        let old = |b: usize| (from[b] < MANY).then_some(from[b] as usize);
         let mut moments: Vec<Moments> = (0..n)
             .map(|b| old(b).map_or(Moments::default(), |a| self.moments[a]))
             .collect();
@@ -894,10 +893,10 @@ impl Regions {
             .map(|b| old(b).map_or(empty, |a| self.boxes[a]))
             .collect();
         let mut untraced = Vec::new();
-        if (0..n).any(|b| !kept(b)) {
+        if (0..n).any(|b| old(b).is_none()) {
             for (f, &r) in labels.iter().enumerate() {
                 let r = r as usize;
-                if kept(r) {
+                if old(r).is_some() {
                     continue;
                 }
                 untraced.push(f as u32);
@@ -919,7 +918,7 @@ impl Regions {
             .collect();
         // A kept region without loops (not traced since an earlier update) is not among them.
         self.untraced_faces = (0..n)
-            .all(|b| !kept(b) || self.loops[b].is_some())
+            .all(|b| old(b).is_none() || self.loops[b].is_some())
             .then_some(untraced);
         self.moments = moments;
         self.boxes = boxes;
