@@ -995,19 +995,13 @@ fn build_checked(
     planes: &[Plane],
     diag: f64,
 ) -> Result<outline::Built, Vec<u32>> {
-    let (polygons, triangles, triangle_region) =
+    let (polygons, triangles, region) =
         outline::build(surface, labels, planes).map_err(|d| d.regions())?;
-    let bad = bad_triangles(
-        &polygons.positions,
-        &triangles,
-        &triangle_region,
-        planes,
-        diag,
-    );
+    let bad = bad_triangles(&polygons.positions, &triangles, &region, planes, diag);
     if bad.is_empty() {
-        Ok((polygons, triangles, triangle_region))
+        Ok((polygons, triangles, region))
     } else {
-        Err(bad.iter().map(|b| triangle_region[b.0]).collect())
+        Err(bad.iter().map(|b| region[b.0]).collect())
     }
 }
 
@@ -1072,13 +1066,8 @@ fn bad_triangles(
 
 /// [`bad_triangles`] of a realised partition's output, on its own planes.
 fn realised_bad(r: &outline::Realised, diag: f64) -> Vec<(usize, Bad)> {
-    bad_triangles(
-        &r.polygons.positions,
-        &r.triangles,
-        &r.triangle_region,
-        &r.planes,
-        diag,
-    )
+    let p = &r.polygons.positions;
+    bad_triangles(p, &r.triangles, &r.triangle_region, &r.planes, diag)
 }
 
 /// The headline error: the mean over input vertices of their distance to their regions'
@@ -1141,15 +1130,9 @@ fn realise(
             part.error / geom::bbox_diagonal(mesh)
         );
     }
-    let r = outline::realise(
-        surface,
-        part.labels.clone(),
-        part.n,
-        opts.k,
-        give_away,
-        stop,
-    )
-    .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
+    let (labels, k) = (part.labels.clone(), opts.k);
+    let r = outline::realise(surface, labels, part.n, k, give_away, stop)
+        .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
     Ok(finish(mesh, surface, opts, smoothed, part, r, t, 0.0))
 }
 
@@ -1536,15 +1519,8 @@ mod tests {
         let topo = Topology::build(&mesh, Path::new("generated")).unwrap();
         let (normals, areas) = face_normals_areas(&mesh.positions, &mesh.faces);
         let surface = outline::Surface::new(&topo, &mesh, &normals, &areas);
-        let mut r = outline::realise(
-            &surface,
-            vec![0; mesh.faces.len()],
-            1,
-            1,
-            true,
-            &Default::default(),
-        )
-        .unwrap();
+        let labels = vec![0; mesh.faces.len()];
+        let mut r = outline::realise(&surface, labels, 1, 1, true, &Default::default()).unwrap();
         let at = cluster::vertex_clusters(&topo, &r.labels);
         let before = input_distances(&mesh.positions, &at, &r.planes).0;
         let diag = geom::bbox_diagonal(&mesh);

@@ -1509,18 +1509,10 @@ pub fn realise(
     }
     // Then the boundaries of the given partition that the realisation merged away, where
     // they are realisable now.
-    let mut resplit_tried = HashSet::new();
+    let mut tried = HashSet::new();
     while n < k && !stopped() {
-        let Some(built) = resplit(
-            s,
-            &mut regions,
-            &start_labels,
-            &mut labels,
-            n,
-            &mut resplit_tried,
-        ) else {
-            break;
-        };
+        let built = resplit(s, &mut regions, &start_labels, &mut labels, n, &mut tried);
+        let Some(built) = built else { break };
         (polygons, triangles, triangle_region) = built;
         n += 1;
     }
@@ -1566,14 +1558,12 @@ pub fn realise(
 /// A region whose halving across its main direction cannot be realised is halved across the
 /// second one too (why: [`super::lloyd::Planes`]'s `AXES`).
 pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize {
-    let mut n = r.planes.len();
-    let before = n;
-    let mut unsplittable = vec![false; n];
+    let (before, mut n) = (r.planes.len(), r.planes.len());
+    let (mut unsplittable, mut regions) = (vec![false; n], Regions::default());
     let planes = super::lloyd::Planes {
         moments: &s.moments,
         rule: s.rule,
     };
-    let mut regions = Regions::default();
     if let Some(b) = spend_budget(
         s,
         &mut regions,
