@@ -2,7 +2,7 @@
 //! self-intersection (its polygons are planar and share corners exactly, so two of them can
 //! only meet where their corners or edges say, unless their planes cut through each other).
 
-use super::geom::{cross, dot, normalize, sub, V3};
+use super::geom::{cross, dot, face_area_normal, normalize, sub, V3};
 use super::polygons::{orient, segments_cross};
 
 /// Six times the signed volume of `a b c d`.
@@ -26,12 +26,12 @@ fn segment_crosses(p: V3, q: V3, t: [V3; 3]) -> bool {
     (s[0] > 0.0 && s[1] > 0.0 && s[2] > 0.0) || (s[0] < 0.0 && s[1] < 0.0 && s[2] < 0.0)
 }
 
-/// The signed distances of the corners of `t` to the plane of `on`, those within `tol` put at
-/// 0 (on the plane at the output's precision); all 0 where `on` has no plane.
-fn distances(t: [V3; 3], on: [V3; 3], tol: f64) -> [f64; 3] {
-    let n = cross(sub(on[1], on[0]), sub(on[2], on[0]));
+/// The signed distances of the corners of `t` to the plane through `o` with normal `n` (any
+/// length), those within `tol` put at 0 (on the plane at the output's precision); all 0 where
+/// `n` is 0.
+fn distances(t: [V3; 3], o: V3, n: V3, tol: f64) -> [f64; 3] {
     let len = dot(n, n).sqrt();
-    t.map(|p| dot(n, sub(p, on[0])))
+    t.map(|p| dot(n, sub(p, o)))
         .map(|d| if d.abs() <= tol * len { 0.0 } else { d / len })
 }
 
@@ -70,12 +70,16 @@ fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
         || b.iter().any(|&i| !a.contains(&i) && inside(i, a))
 }
 
-/// Whether triangles `ta` and `tb` (not in one plane; `da`, `db` their corners' [`distances`]
-/// to each other's plane) meet beyond touching at the output's precision: Möller's interval
-/// test, their stretches of the planes' common line overlapping by more than `tol`.
-fn overlap_on_common_line(ta: [V3; 3], tb: [V3; 3], da: [f64; 3], db: [f64; 3], tol: f64) -> bool {
-    let normal = |t: [V3; 3]| cross(sub(t[1], t[0]), sub(t[2], t[0]));
-    let Some(dir) = normalize(cross(normal(ta), normal(tb))) else {
+/// Whether triangles `ta` and `tb` (not in one plane; normals `na`, `nb`; `da`, `db` their
+/// corners' [`distances`] to each other's plane) meet beyond touching at the output's
+/// precision: Möller's interval test, their stretches of the planes' common line overlapping
+/// by more than `tol`.
+fn overlap_on_common_line(
+    (ta, na, da): ([V3; 3], V3, [f64; 3]),
+    (tb, nb, db): ([V3; 3], V3, [f64; 3]),
+    tol: f64,
+) -> bool {
+    let Some(dir) = normalize(cross(na, nb)) else {
         return false;
     };
     let stretch = |t: [V3; 3], d: [f64; 3]| {
@@ -109,14 +113,16 @@ fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3], tol: f64) -> bool {
     let shared: Vec<u32> = a.iter().copied().filter(|x| b.contains(x)).collect();
     let ta = a.map(|i| pos[i as usize]);
     let tb = b.map(|i| pos[i as usize]);
-    let (da, db) = (distances(ta, tb, tol), distances(tb, ta, tol));
+    let (na, nb) = (face_area_normal(pos, a), face_area_normal(pos, b));
+    let (da, db) = (distances(ta, tb[0], nb, tol), distances(tb, ta[0], na, tol));
     if da.iter().chain(&db).all(|&d| d == 0.0) {
-        return overlap_in_plane(pos, a, b, cross(sub(ta[1], ta[0]), sub(ta[2], ta[0])));
+        return overlap_in_plane(pos, a, b, na);
     }
     // A corner not shared on the other's plane: the orientations the sign tests below rest on
     // are zero there up to rounding, so Möller's interval test decides too.
     let on = |x: [u32; 3], d: [f64; 3]| (0..3).any(|k| d[k] == 0.0 && !shared.contains(&x[k]));
-    if shared.len() < 2 && (on(a, da) || on(b, db)) && overlap_on_common_line(ta, tb, da, db, tol) {
+    let (sa, sb) = ((ta, na, da), (tb, nb, db));
+    if shared.len() < 2 && (on(a, da) || on(b, db)) && overlap_on_common_line(sa, sb, tol) {
         return true;
     }
     let edges = |t: [u32; 3]| (0..3).map(move |k| (t[k], t[(k + 1) % 3]));
