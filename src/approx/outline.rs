@@ -169,6 +169,13 @@ pub enum Defect {
         "the corner of regions {regions:?} at vertex {vertex} lies on another junction's corner"
     )]
     Corner { vertex: u32, regions: Vec<u32> },
+    /// Two input vertices lie on one point (the input touches itself there) and so do their
+    /// corners: their polygons would touch too.
+    #[error("input vertices {vertices:?} lie on one point (the surface touches itself there), and so do the corners of regions {regions:?} on them")]
+    Touching {
+        vertices: [u32; 2],
+        regions: Vec<u32>,
+    },
     /// The region occurs twice around one vertex: its polygon would touch itself.
     #[error("regions {regions:?} meet at vertex {vertex} with region {twice} twice (its polygon would touch itself)")]
     Pinch {
@@ -201,6 +208,7 @@ impl Defect {
         let mut r = match self {
             Defect::Far { regions, .. }
             | Defect::Corner { regions, .. }
+            | Defect::Touching { regions, .. }
             | Defect::Pinch { regions, .. } => regions.clone(),
             Defect::Loop { region, neighbors } => {
                 let mut r = neighbors.clone();
@@ -531,8 +539,9 @@ fn inside(p: [f64; 2], poly: &[[f64; 2]]) -> bool {
     w
 }
 
-/// Two corners of different junctions closer than `tol`, as a defect.
-fn coincident(cs: &Corners, tol: f64) -> Option<Defect> {
+/// Two corners of different junctions closer than `tol`, as a defect ([`Defect::Touching`]
+/// where their input vertices are that close too: the message then names the input's cause).
+fn coincident(cs: &Corners, pos: &[V3], tol: f64) -> Option<Defect> {
     let mut order: Vec<usize> = (0..cs.positions.len()).collect();
     order.sort_by(|&a, &b| cs.positions[a][0].total_cmp(&cs.positions[b][0]));
     for (i, &a) in order.iter().enumerate() {
@@ -546,10 +555,13 @@ fn coincident(cs: &Corners, tol: f64) -> Option<Defect> {
                 regions.extend_from_slice(&cs.regions[b]);
                 regions.sort_unstable();
                 regions.dedup();
-                return Some(Defect::Corner {
-                    vertex: cs.vertex[a],
-                    regions,
-                });
+                let (v, w) = (cs.vertex[a], cs.vertex[b]);
+                let apart = sub(pos[v as usize], pos[w as usize]);
+                if dot(apart, apart).sqrt() <= tol {
+                    let vertices = [v.min(w), v.max(w)];
+                    return Some(Defect::Touching { vertices, regions });
+                }
+                return Some(Defect::Corner { vertex: v, regions });
             }
         }
     }
@@ -717,7 +729,7 @@ fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Resu
         on_loop[v as usize] = true;
     }
     let cs = corners(s, &regions.labels, planes, &size, &on_loop)?;
-    if let Some(d) = coincident(&cs, s.tol) {
+    if let Some(d) = coincident(&cs, s.pos, s.tol) {
         return Err(d);
     }
     let mut mesh = PolygonMesh {
@@ -1819,6 +1831,34 @@ mod tests {
             labels[f] = 0;
             same(&mut regions, &labels, 6);
         });
+    }
+
+    /// Two triangles on different planes whose corners 2 and 3 are one point: the polygons
+    /// would touch there, and the defect names the input's two vertices.
+    #[test]
+    fn corners_on_touching_input_vertices_name_them() {
+        let o = [0.0, 0.0, 0.0];
+        let m = crate::mesh::TriMesh {
+            positions: vec![
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                o,
+                o,
+                [0.0, -1.0, 0.0],
+                [0.0, 0.0, -1.0],
+            ],
+            faces: vec![[0, 1, 2], [3, 4, 5]],
+        };
+        let t = Topology::build(&m, std::path::Path::new("touching")).unwrap();
+        let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
+        let s = Surface::new(&t, &m, &normals, &areas);
+        let labels = [0, 1];
+        let planes = fit_planes(&s, &labels, 2);
+        let touching = Defect::Touching {
+            vertices: [2, 3],
+            regions: vec![0, 1],
+        };
+        assert_eq!(build(&s, &labels, &planes).err(), Some(touching));
     }
 
     /// A realisation whose stop flag is set gives no polygon mesh (its result is not wanted);
