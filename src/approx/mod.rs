@@ -405,10 +405,10 @@ fn best_run(
     )
     .map_err(|e| match e {
         ApproxError::Unrealisable(facing) => ApproxError::Unrealisable(format!(
-            "no run of seeds {}..={} gave a valid polygon mesh of this {} with at most K = {} \
-             regions on the regions' least-squares planes (the last: {least_squares}), nor of \
-             seeds {}..={} on the planes their faces face (the last: {facing}); nothing was \
-             written (a larger K, or more --restarts, may)",
+            "no run of seeds {}..={} gave a valid polygon mesh of the input ({}) with at most \
+             K = {} regions on the regions' least-squares planes (the last: {least_squares}), \
+             nor of seeds {}..={} on the planes their faces face (the last: {facing}); nothing \
+             was written (a larger K, or more --restarts, may)",
             opts.seed,
             opts.seed.wrapping_add(last as u64),
             topo.describe(),
