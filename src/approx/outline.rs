@@ -1837,26 +1837,18 @@ mod tests {
     /// would touch there, and the defect names the input's two vertices.
     #[test]
     fn corners_on_touching_input_vertices_name_them() {
-        let o = [0.0, 0.0, 0.0];
-        let m = crate::mesh::TriMesh {
-            positions: vec![
-                [1.0, 0.0, 0.0],
-                [0.0, 1.0, 0.0],
-                o,
-                o,
-                [0.0, -1.0, 0.0],
-                [0.0, 0.0, -1.0],
-            ],
-            faces: vec![[0, 1, 2], [3, 4, 5]],
-        };
+        let (o, x, y, z) = ([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]);
+        let positions = vec![x, y, o, o, scale(y, -1.0), z];
+        let faces = vec![[0, 1, 2], [3, 4, 5]];
+        let m = crate::mesh::TriMesh { positions, faces };
         let t = Topology::build(&m, std::path::Path::new("touching")).unwrap();
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
         let s = Surface::new(&t, &m, &normals, &areas);
-        let labels = [0, 1];
+        let (labels, regions) = ([0, 1], vec![0, 1]);
         let planes = fit_planes(&s, &labels, 2);
         let touching = Defect::Touching {
             vertices: [2, 3],
-            regions: vec![0, 1],
+            regions,
         };
         assert_eq!(build(&s, &labels, &planes).err(), Some(touching));
     }
