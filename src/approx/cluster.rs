@@ -330,11 +330,11 @@ pub fn regions_at(topo: &Topology, face_cluster: &[u32], v: u32) -> Vec<u32> {
     c
 }
 
-/// Reassigns faces whose three vertices all lie in another region too: such a face would have
-/// its corners on two planes at once, i.e. on their intersection line, and collapse. Moving it
-/// to that other region removes the shared constraint when a corner then leaves its old region.
-/// Returns how many faces were moved (bounded passes; whatever remains is reported by the
-/// planarity stage as degenerate).
+/// Reassigns faces whose three vertices all lie in another region too (a one-face spike into
+/// it, touching it along an edge): the spike's outline turns back on itself within one face,
+/// and its corners are junctions of planes that meet nowhere near it. Without this step the
+/// realisation answers those junctions itself, worse (BENCHMARKS, planar approximation round
+/// 28). Returns how many faces were moved (bounded passes).
 pub fn fix_collapsing_faces(
     topo: &Topology,
     faces: &[[u32; 3]],
