@@ -331,10 +331,10 @@ pub fn regions_at(topo: &Topology, face_cluster: &[u32], v: u32) -> Vec<u32> {
 }
 
 /// Reassigns faces whose three vertices all lie in another region too (a one-face spike into
-/// it, touching it along an edge): the spike's outline turns back on itself within one face,
-/// and its corners are junctions of planes that meet nowhere near it. Without this step the
-/// realisation answers those junctions itself, worse (BENCHMARKS, planar approximation round
-/// 28). Returns how many faces were moved (bounded passes).
+/// it, touching it along an edge): the spike's outline turns back on itself within one face.
+/// Written for the earlier design (faces pressed onto planes); measured in this one, the
+/// realisation does worse without it (BENCHMARKS, planar approximation round 28). Returns how
+/// many faces were moved (bounded passes).
 pub fn fix_collapsing_faces(
     topo: &Topology,
     faces: &[[u32; 3]],
