@@ -24,7 +24,9 @@ use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, HashSet};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::geom::{add, cross, dot, normalize, principal_axis, scale, sub, Plane, PlaneRule, V3};
+use super::geom::{
+    add, cross, dot, norm, normalize, principal_axis, scale, sub, Plane, PlaneRule, V3,
+};
 use super::intersect::first_crossing;
 use super::polygons::{
     area2, basis, bridge_holes, ear_clip, orient, region_loops, segments_cross, PolygonMesh,
@@ -550,14 +552,13 @@ fn coincident(cs: &Corners, pos: &[V3], tol: f64) -> Option<Defect> {
             if d[0] > tol {
                 break;
             }
-            if cs.vertex[a] != cs.vertex[b] && dot(d, d).sqrt() <= tol {
+            if cs.vertex[a] != cs.vertex[b] && norm(d) <= tol {
                 let mut regions = cs.regions[a].clone();
                 regions.extend_from_slice(&cs.regions[b]);
                 regions.sort_unstable();
                 regions.dedup();
                 let (v, w) = (cs.vertex[a], cs.vertex[b]);
-                let apart = sub(pos[v as usize], pos[w as usize]);
-                if dot(apart, apart).sqrt() <= tol {
+                if norm(sub(pos[v as usize], pos[w as usize])) <= tol {
                     let vertices = [v.min(w), v.max(w)];
                     return Some(Defect::Touching { vertices, regions });
                 }
