@@ -21,8 +21,12 @@
 //! set in the environment prints each defect met to stderr.
 
 use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap, HashSet};
+use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, Ordering};
+
+// The keys are face and region numbers and partition hashes, looked up on every build, none
+// from outside: foldhash, not SipHash.
+use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
 use super::geom::{
     add, cross, dot, norm, normalize, principal_axis, scale, sub, Plane, PlaneRule, V3,
@@ -294,13 +298,17 @@ struct Corners {
     /// are `at_corners[first..end]`; ascending by vertex (the order they are found in).
     at: Vec<(u32, u32, u32, u32)>,
     at_corners: Vec<u32>,
+    /// Per input vertex, its first entry in `at` (`u32::MAX`: none). Every outline vertex is
+    /// looked up on every build, most of them junction-free: a direct index, not a search.
+    first_at: Vec<u32>,
 }
 
 impl Corners {
     /// Region `r`'s corners at vertex `v`, in outline order.
     fn at(&self, v: u32, r: u32) -> Option<&[u32]> {
-        let first = self.at.partition_point(|e| e.0 < v);
-        self.at[first..]
+        let first = self.first_at[v as usize];
+        self.at
+            .get(first as usize..)?
             .iter()
             .take_while(|e| e.0 == v)
             .find(|e| e.1 == r)
@@ -310,6 +318,9 @@ impl Corners {
     /// Records `r`'s corners at `v` (vertices in ascending order).
     fn set_at(&mut self, v: u32, r: u32, corners: impl IntoIterator<Item = u32>) {
         let first = self.at_corners.len() as u32;
+        if self.first_at[v as usize] == u32::MAX {
+            self.first_at[v as usize] = self.at.len() as u32;
+        }
         self.at_corners.extend(corners);
         self.at.push((v, r, first, self.at_corners.len() as u32));
     }
@@ -371,6 +382,7 @@ fn corners(
         regions: Vec::new(),
         at: Vec::new(),
         at_corners: Vec::new(),
+        first_at: vec![u32::MAX; s.topo.n_vertices],
     };
     let mut triples: HashMap<[u32; 3], u32> = HashMap::new();
     // Per-vertex lists, kept to reuse their memory (most vertices where regions meet are
@@ -1169,7 +1181,7 @@ fn hand_out(
     members: &[usize],
     cost: impl Fn(usize, u32) -> Option<f64>,
 ) -> Option<Vec<(usize, u32)>> {
-    let mut label: HashMap<usize, u32> = std::collections::HashMap::new();
+    let mut label: HashMap<usize, u32> = HashMap::new();
     let mut heap: BinaryHeap<Reverse<(u64, usize, u32)>> = BinaryHeap::new();
     let push_from = |f: usize, label: &HashMap<usize, u32>, heap: &mut BinaryHeap<_>| {
         for g in super::lloyd::neighbors(topo, f) {
@@ -1332,11 +1344,10 @@ impl<'a> Surface<'a> {
     }
 }
 
+/// A partition's fingerprint, for the sets of partitions seen or tried.
 fn hash_of(labels: &[u32]) -> u64 {
-    use std::hash::{Hash, Hasher};
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    labels.hash(&mut h);
-    h.finish()
+    use std::hash::BuildHasher;
+    foldhash::quality::FixedState::with_seed(0).hash_one(labels)
 }
 
 /// The polygon mesh of the partition `labels` (regions `0..n`, each connected) with the

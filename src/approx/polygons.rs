@@ -115,14 +115,25 @@ pub(super) fn region_loops(
         Some(listed) => listed.iter().for_each(|&f| visit(f as usize)),
         None => (0..faces.len()).for_each(visit),
     }
-    // Grouped by source vertex, face order kept within a group (a stable sort).
-    let mut by_source: Vec<u32> = (0..half.len() as u32).collect();
-    by_source.sort_by_key(|&i| half[i as usize].1);
+    // Grouped by source vertex, face order kept within a group (a counting sort: stable, and
+    // each vertex's group found by index while the loops are walked).
+    let mut start = vec![0u32; topo.n_vertices + 1];
+    for h in &half {
+        start[h.1 as usize + 1] += 1;
+    }
+    for v in 0..topo.n_vertices {
+        start[v + 1] += start[v];
+    }
+    let mut by_source = vec![0u32; half.len()];
+    let mut next = start.clone();
+    for (i, h) in half.iter().enumerate() {
+        by_source[next[h.1 as usize] as usize] = i as u32;
+        next[h.1 as usize] += 1;
+    }
     let mut used = vec![false; half.len()];
     // The latest unused half-edge of region r leaving v.
     let mut take = |r: u32, v: u32| -> Option<u32> {
-        let lo = by_source.partition_point(|&i| half[i as usize].1 < v);
-        let hi = lo + by_source[lo..].partition_point(|&i| half[i as usize].1 == v);
+        let (lo, hi) = (start[v as usize] as usize, start[v as usize + 1] as usize);
         let &i = by_source[lo..hi]
             .iter()
             .rev()
