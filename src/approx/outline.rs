@@ -23,6 +23,7 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
 
 // The keys are face and region numbers and partition hashes, looked up on every build, none
 // from outside: foldhash, not SipHash.
@@ -1250,7 +1251,16 @@ pub struct Surface<'a> {
     tol: f64,
     /// Which principal plane of a region's faces is its plane.
     pub rule: PlaneRule,
+    /// The splits made so far by any realisation of this surface ([`Surface::split`]): by the
+    /// fingerprint of the region's faces, whether it could be halved and the faces of the new
+    /// half. The realisations of one run split the same regions again and again (the two of
+    /// one partition share their start; a cascade retries a region): a fifth of the splits on
+    /// the slowest meshes. With the count of faces held, kept under 64 per input face.
+    splits: Mutex<(HashMap<u64, Halves>, usize)>,
 }
+
+/// A split made: whether the region could be halved, and the faces of the new half.
+type Halves = (bool, Vec<u32>);
 
 impl<'a> Surface<'a> {
     /// The surface of `mesh` with its face normals and areas.
@@ -1296,14 +1306,41 @@ impl<'a> Surface<'a> {
             moments: Moments::of_faces(pos, faces),
             tol: 1e-6 * crate::vol::tet::bbox_diagonal(pos),
             rule: PlaneRule::LeastSquares,
+            splits: Mutex::default(),
         }
     }
 
     /// Splits region `r` of `labels` in two, the new half labelled `n` (Lloyd, 10 rounds;
     /// [`super::lloyd::halve`] under [`super::lloyd::Normals`]). False when it cannot be halved.
+    ///
+    /// The halves depend on the region's faces alone (every new label is above every old
+    /// one, so the two compare the same way in any partition): a split made before is
+    /// replayed from `splits`, the same labels.
     fn split(&self, labels: &mut [u32], r: u32, n: usize) -> bool {
+        let faces: Vec<u32> = (0..labels.len() as u32)
+            .filter(|&f| labels[f as usize] == r)
+            .collect();
+        let key = hash_of(&faces);
+        let known = self.splits.lock().ok().and_then(|m| m.0.get(&key).cloned());
+        if let Some((halved, new)) = known {
+            for f in new {
+                labels[f as usize] = n as u32;
+            }
+            return halved;
+        }
         let metric = self.normals_metric();
-        super::lloyd::halve(self.topo, &metric, labels, r, n as u32, 10, 0)
+        let halved = super::lloyd::halve(self.topo, &metric, labels, r, n as u32, 10, 0);
+        let new: Vec<u32> = faces
+            .into_iter()
+            .filter(|&f| labels[f as usize] == n as u32)
+            .collect();
+        if let Ok(mut m) = self.splits.lock() {
+            if m.1 + new.len() <= 64 * labels.len() {
+                m.1 += new.len();
+                m.0.insert(key, (halved, new));
+            }
+        }
+        halved
     }
 
     /// Whether regions `a` and `b` of `labels` (a region just halved) fit two planes better
@@ -1775,6 +1812,34 @@ mod tests {
         let (m, t, sides) = crate::approx::testing::cube(3);
         let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
         test(&Surface::new(&t, &m, &normals, &areas), &sides);
+    }
+
+    /// A split replayed from the surface's record gives the labels the split gave, and a
+    /// region of the same faces under other labels (another partition) is split alike.
+    #[test]
+    fn a_replayed_split_is_the_split_made() {
+        on_cube(|s, sides| {
+            // Two sides as one region: a bent region, split across its edge.
+            let bent = |r: u32| -> Vec<u32> {
+                sides
+                    .iter()
+                    .map(|&x| if x <= 1 { r } else { x + 10 })
+                    .collect()
+            };
+            let mut first = bent(0);
+            assert!(s.split(&mut first, 0, 20));
+            let halves = |l: &[u32], a: u32| -> Vec<bool> { l.iter().map(|&x| x == a).collect() };
+            assert!(halves(&first, 20).contains(&true) && halves(&first, 0).contains(&true));
+            let mut again = bent(0);
+            assert!(s.split(&mut again, 0, 20));
+            assert_eq!(again, first);
+            // Another label, made afresh on a surface with no record.
+            on_cube(|fresh, _| {
+                let mut other = bent(5);
+                assert!(fresh.split(&mut other, 5, 30));
+                assert_eq!(halves(&other, 30), halves(&first, 20));
+            });
+        });
     }
 
     /// `Regions` kept across label changes gives exactly (bit for bit) what summing every
