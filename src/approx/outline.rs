@@ -1259,8 +1259,9 @@ pub struct Surface<'a> {
     splits: Mutex<(HashMap<u64, Halves>, usize)>,
 }
 
-/// A split made: whether the region could be halved, and the faces of the new half.
-type Halves = (bool, Vec<u32>);
+/// A split made: the region's face count, whether it could be halved, and the faces of the
+/// new half.
+type Halves = (usize, bool, Vec<u32>);
 
 impl<'a> Surface<'a> {
     /// The surface of `mesh` with its face normals and areas.
@@ -1322,7 +1323,11 @@ impl<'a> Surface<'a> {
             .collect();
         let key = hash_of(&faces);
         let known = self.splits.lock().ok().and_then(|m| m.0.get(&key).cloned());
-        if let Some((halved, new)) = known {
+        // Another region with the same fingerprint (a collision) would not match: its faces
+        // are made afresh.
+        let matches =
+            |h: &Halves| h.0 == faces.len() && h.2.iter().all(|&f| labels[f as usize] == r);
+        if let Some((_, halved, new)) = known.filter(matches) {
             for f in new {
                 labels[f as usize] = n as u32;
             }
@@ -1330,6 +1335,7 @@ impl<'a> Surface<'a> {
         }
         let metric = self.normals_metric();
         let halved = super::lloyd::halve(self.topo, &metric, labels, r, n as u32, 10, 0);
+        let count = faces.len();
         let new: Vec<u32> = faces
             .into_iter()
             .filter(|&f| labels[f as usize] == n as u32)
@@ -1337,7 +1343,7 @@ impl<'a> Surface<'a> {
         if let Ok(mut m) = self.splits.lock() {
             if m.1 + new.len() <= 64 * labels.len() {
                 m.1 += new.len();
-                m.0.insert(key, (halved, new));
+                m.0.insert(key, (count, halved, new));
             }
         }
         halved
@@ -1381,7 +1387,8 @@ impl<'a> Surface<'a> {
     }
 }
 
-/// A partition's fingerprint, for the sets of partitions seen or tried.
+/// A fingerprint of a list of labels or faces (64 bits), for the sets of partitions seen or
+/// tried and the record of splits.
 fn hash_of(labels: &[u32]) -> u64 {
     use std::hash::BuildHasher;
     foldhash::quality::FixedState::with_seed(0).hash_one(labels)
