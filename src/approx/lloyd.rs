@@ -294,6 +294,21 @@ pub fn halve<M: Metric>(
     axis: usize,
 ) -> bool {
     let members: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == c).collect();
+    halve_members(topo, metric, labels, &members, c, new_label, rounds, axis)
+}
+
+/// [`halve`] of region `c` whose faces, ascending, are `members` (a caller that has them).
+#[allow(clippy::too_many_arguments)]
+pub fn halve_members<M: Metric>(
+    topo: &Topology,
+    metric: &M,
+    labels: &mut [u32],
+    members: &[usize],
+    c: u32,
+    new_label: u32,
+    rounds: usize,
+    axis: usize,
+) -> bool {
     let (key, area) = (|f| metric.key(f), |f| metric.weight(f));
     let sum = members
         .iter()
@@ -304,7 +319,7 @@ pub fn halve<M: Metric>(
     }
     let mean = scale(sum, 1.0 / total);
     let mut cov = [[0.0; 3]; 3];
-    for &f in &members {
+    for &f in members {
         let d = sub(key(f), mean);
         for i in 0..3 {
             for j in 0..3 {
@@ -324,7 +339,7 @@ pub fn halve<M: Metric>(
     }
     let dir = [vecs[0][k], vecs[1][k], vecs[2][k]];
     let mut n_new = 0;
-    for &f in &members {
+    for &f in members {
         let d = sub(key(f), mean);
         if d[0] * dir[0] + d[1] * dir[1] + d[2] * dir[2] > 0.0 {
             labels[f] = new_label;
@@ -332,12 +347,12 @@ pub fn halve<M: Metric>(
         }
     }
     if n_new == 0 || n_new == members.len() {
-        for &f in &members {
+        for &f in members {
             labels[f] = c;
         }
         return false;
     }
-    relax_subset(topo, metric, labels, &members, rounds);
+    relax_subset(topo, metric, labels, members, rounds);
     let kept = members.iter().filter(|&&f| labels[f] == c).count();
     kept > 0 && kept < members.len()
 }

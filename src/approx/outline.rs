@@ -1318,9 +1318,7 @@ impl<'a> Surface<'a> {
     /// one, so the two compare the same way in any partition): a split made before is
     /// replayed from `splits`, the same labels.
     fn split(&self, labels: &mut [u32], r: u32, n: usize) -> bool {
-        let faces: Vec<u32> = (0..labels.len() as u32)
-            .filter(|&f| labels[f as usize] == r)
-            .collect();
+        let faces: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == r).collect();
         let key = hash_of(&faces);
         let known = self.splits.lock().ok().and_then(|m| m.0.get(&key).cloned());
         // Another region with the same fingerprint (a collision) would not match: its faces
@@ -1334,16 +1332,17 @@ impl<'a> Surface<'a> {
             return halved;
         }
         let metric = self.normals_metric();
-        let halved = super::lloyd::halve(self.topo, &metric, labels, r, n as u32, 10, 0);
-        let count = faces.len();
+        let halved =
+            super::lloyd::halve_members(self.topo, &metric, labels, &faces, r, n as u32, 10, 0);
         let new: Vec<u32> = faces
-            .into_iter()
-            .filter(|&f| labels[f as usize] == n as u32)
+            .iter()
+            .filter(|&&f| labels[f] == n as u32)
+            .map(|&f| f as u32)
             .collect();
         if let Ok(mut m) = self.splits.lock() {
             if m.1 + new.len() <= 64 * labels.len() {
                 m.1 += new.len();
-                m.0.insert(key, (count, halved, new));
+                m.0.insert(key, (faces.len(), halved, new));
             }
         }
         halved
@@ -1389,9 +1388,9 @@ impl<'a> Surface<'a> {
 
 /// A fingerprint of a list of labels or faces (64 bits), for the sets of partitions seen or
 /// tried and the record of splits.
-fn hash_of(labels: &[u32]) -> u64 {
+fn hash_of<T: std::hash::Hash>(list: &[T]) -> u64 {
     use std::hash::BuildHasher;
-    foldhash::quality::FixedState::with_seed(0).hash_one(labels)
+    foldhash::quality::FixedState::with_seed(0).hash_one(list)
 }
 
 /// The polygon mesh of the partition `labels` (regions `0..n`, each connected) with the
