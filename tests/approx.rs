@@ -805,3 +805,86 @@ fn outline_refuses_fewer_regions_than_the_components_need() {
     assert_eq!(out.report.k_obtained, 12);
     assert_watertight(&out.polygons.polygons);
 }
+
+/// The surface of the eight unit cubes around the middle one of a 3×3×1 block (a square
+/// frame: genus 1), each square cut along a diagonal, faces counter-clockwise from outside.
+fn square_frame() -> TriMesh {
+    let cell = |x: i64, y: i64| (0..3).contains(&x) && (0..3).contains(&y) && (x, y) != (1, 1);
+    let mut index = HashMap::new();
+    let mut m = TriMesh::default();
+    let mut id = |p: [i64; 3]| -> u32 {
+        *index.entry(p).or_insert_with(|| {
+            m.positions.push(p.map(|c| c as f64));
+            m.positions.len() as u32 - 1
+        })
+    };
+    let mut faces = Vec::new();
+    for (x, y) in (0..3).flat_map(|x| (0..3).map(move |y| (x, y))) {
+        if !cell(x, y) {
+            continue;
+        }
+        for axis in 0..3 {
+            for far in [0, 1] {
+                let mut o = [x, y, 0];
+                o[axis] += 2 * far - 1;
+                if axis < 2 && cell(o[0], o[1]) {
+                    continue;
+                }
+                // The square of the cell's side: corners from `u` and `w` (e_u × e_w = e_axis).
+                let (u, w) = ((axis + 1) % 3, (axis + 2) % 3);
+                let corner = |i: i64, j: i64| {
+                    let mut p = [x, y, 0];
+                    p[axis] += far;
+                    p[u] += i;
+                    p[w] += j;
+                    p
+                };
+                let q = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)];
+                for f in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+                    faces.push(if far == 1 { f } else { [f[0], f[2], f[1]] });
+                }
+            }
+        }
+    }
+    m.faces = faces.into_iter().map(|f| f.map(&mut id)).collect();
+    m
+}
+
+/// A tunnel whose wall has no plane of its own: the frame's top and inner walls one region, its
+/// bottom another, the outer walls one each. The loop where the inner walls meet the bottom
+/// has no corner, so the partition is a `Handle` defect — unless handles may close: then the
+/// top and bottom polygons cover the tunnel, and the mesh is a closed box of six rectangles
+/// (Euler characteristic 2, the frame's 0).
+#[test]
+fn a_tunnel_without_planes_of_its_own_is_closed_by_the_polygons_around_it() {
+    let m = square_frame();
+    let t = topo(&m);
+    assert_eq!(t.genus(), Some(1));
+    let (normals, areas) = face_normals_areas(&m.positions, &m.faces);
+    let s = Surface::new(&t, &m, &normals, &areas);
+    let labels: Vec<u32> = (m.faces.iter().zip(&normals))
+        .map(|(f, n)| {
+            let c = f.iter().fold([0.0; 3], |c, &v| {
+                std::array::from_fn(|k| c[k] + m.positions[v as usize][k] / 3.0)
+            });
+            let outer =
+                |k: usize| (c[k] < 1e-9 && n[k] < -0.5) || (c[k] > 3.0 - 1e-9 && n[k] > 0.5);
+            match () {
+                _ if n[2] < -0.5 => 1,
+                _ if outer(0) => 2 + u32::from(n[0] > 0.0),
+                _ if outer(1) => 4 + u32::from(n[1] > 0.0),
+                _ => 0,
+            }
+        })
+        .collect();
+    let planes = outline::fit_planes(&s, &labels, 6);
+    let refused = outline::build(&s, &labels, &planes, false).err();
+    assert_eq!(refused, Some(outline::Defect::Handle { regions: [0, 1] }));
+    let (poly, triangles, _) = outline::build(&s, &labels, &planes, true).unwrap();
+    assert_eq!(poly.polygons.len(), 6);
+    assert_eq!(poly.positions.len(), 8);
+    assert!(poly.polygons.iter().all(|p| p.len() == 4));
+    assert_eq!(triangles.len(), 12);
+    assert_eq!(poly.euler_characteristic(), 2);
+    assert_watertight(&poly.polygons);
+}

@@ -947,7 +947,7 @@ fn refit(
             .zip(&t)
             .map(|((a, b), &t)| geom::blend_planes(a, b, t))
             .collect();
-        match build_checked(surface, &r.labels, &planes, diag) {
+        match build_checked(surface, &r.labels, &planes, r.closes_handles, diag) {
             Ok((polygons, triangles, triangle_region)) => {
                 let error = |p: &[Plane]| input_distances(pos, regions_at, p).0;
                 let (before, after) = (error(&r.planes), error(&planes));
@@ -994,10 +994,11 @@ fn build_checked(
     surface: &outline::Surface<'_>,
     labels: &[u32],
     planes: &[Plane],
+    close_handles: bool,
     diag: f64,
 ) -> Result<outline::Built, Vec<u32>> {
     let (polygons, triangles, region) =
-        outline::build(surface, labels, planes).map_err(|d| d.regions())?;
+        outline::build(surface, labels, planes, close_handles).map_err(|d| d.regions())?;
     let bad = bad_triangles(&polygons.positions, &triangles, &region, planes, diag);
     if bad.is_empty() {
         Ok((polygons, triangles, region))

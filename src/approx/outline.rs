@@ -194,6 +194,10 @@ pub enum Defect {
     /// mesh's border).
     #[error("a boundary loop of region {region} (ringed by regions {neighbors:?}) has fewer than three corners")]
     Loop { region: u32, neighbors: Vec<u32> },
+    /// A loop between two regions has no corner while each has an outline elsewhere: a
+    /// handle of the input passes through it, which their polygons would close.
+    #[error("a loop between regions {regions:?} has no corner (a handle of the input passes through it)")]
+    Handle { regions: [u32; 2] },
     /// The region is a whole closed component: a closed surface has no outline.
     #[error("region {region} covers a whole closed component, which no planar polygon can")]
     Closed { region: u32 },
@@ -225,7 +229,7 @@ impl Defect {
             Defect::Closed { region } => vec![*region],
             Defect::Outline { region, regions } if regions.is_empty() => vec![*region],
             Defect::Outline { regions, .. } => regions.clone(),
-            Defect::Crossing { regions } => regions.to_vec(),
+            Defect::Crossing { regions } | Defect::Handle { regions } => regions.to_vec(),
             Defect::Stopped => Vec::new(),
         };
         r.retain(|&x| x != OUTSIDE);
@@ -582,10 +586,10 @@ fn coincident(cs: &Corners, pos: &[V3], tol: f64) -> Option<Defect> {
     None
 }
 
-/// One region's outline loops as corner cycles; a border corner on the chord of its
-/// neighbours (to 1e-6 of the chord's length) adds nothing to the outline and would give a
-/// zero-area triangle, and it belongs to this polygon alone, so it is dropped (the mesh stays
-/// watertight).
+/// One region's outline loops as corner cycles, or for a loop with fewer than three corners
+/// the regions ringing it (`Err`); a border corner on the chord of its neighbours (to 1e-6 of
+/// the chord's length) adds nothing to the outline and would give a zero-area triangle, and it
+/// belongs to this polygon alone, so it is dropped (the mesh stays watertight).
 fn region_outlines(
     topo: &Topology,
     faces: &[[u32; 3]],
@@ -593,7 +597,7 @@ fn region_outlines(
     cs: &Corners,
     r: u32,
     region_loops: &[Vec<u32>],
-) -> Result<Vec<Vec<u32>>, Defect> {
+) -> Loops {
     let mut outlines = Vec::new();
     for lp in region_loops {
         let mut ol: Vec<u32> = lp
@@ -635,18 +639,52 @@ fn region_outlines(
             }
             nb.sort_unstable();
             nb.dedup();
-            return Err(Defect::Loop {
-                region: r,
-                neighbors: nb,
-            });
+            outlines.push(Err(nb));
+        } else {
+            outlines.push(Ok(ol));
         }
-        outlines.push(ol);
     }
-    if outlines.is_empty() {
+    outlines
+}
+
+/// Region `r`'s polygon outlines out of every region's loops (`all`, [`region_outlines`]): its
+/// loops with three corners or more. A loop with none, between two regions alone, each with
+/// an outline elsewhere, is a [`Defect::Handle`] or, with `close_handles`, left out of both
+/// polygons (by the orientation check of [`region_polygon`], it is then a hole of both): the
+/// two polygons cover the hole, the mesh stays watertight (no edge of either lies on the
+/// loop), and a handle of the input through it is closed — the realisation of a tunnel whose
+/// wall has no plane of its own. Any other loop with fewer than three corners is a
+/// [`Defect::Loop`]; a region with no loop, [`Defect::Closed`].
+fn kept_outlines(all: &[Loops], r: u32, close_handles: bool) -> Result<Vec<&[u32]>, Defect> {
+    let has_outline = |r: u32| all[r as usize].iter().any(|o| o.is_ok());
+    let mut out = Vec::new();
+    for lp in &all[r as usize] {
+        match lp {
+            Ok(ol) => out.push(&ol[..]),
+            Err(nb) => match nb[..] {
+                [c] if c != OUTSIDE && has_outline(r) && has_outline(c) => {
+                    if !close_handles {
+                        return Err(Defect::Handle { regions: [r, c] });
+                    }
+                }
+                _ => {
+                    return Err(Defect::Loop {
+                        region: r,
+                        neighbors: nb.clone(),
+                    })
+                }
+            },
+        }
+    }
+    if out.is_empty() {
         return Err(Defect::Closed { region: r });
     }
-    Ok(outlines)
+    Ok(out)
 }
+
+/// A region's loops: each its corner cycle, or the regions ringing it where it has fewer than
+/// three corners.
+type Loops = Vec<Result<Vec<u32>, Vec<u32>>>;
 
 /// Checks that the outlines of region `r` bound a simple polygon with holes in its plane (the
 /// outer loop, of largest area, counter-clockwise; holes clockwise and inside it; no two
@@ -655,7 +693,7 @@ fn region_polygon(
     cs: &Corners,
     plane: &Plane,
     r: u32,
-    outlines: &[Vec<u32>],
+    outlines: &[&[u32]],
 ) -> Result<(Vec<u32>, Vec<[u32; 3]>), Defect> {
     let (u, w) = basis(plane.n);
     let to2 = |c: u32| {
@@ -702,9 +740,9 @@ fn region_polygon(
     }
     let holes = (0..outlines.len())
         .filter(|&i| i != outer)
-        .map(|i| outlines[i].clone())
+        .map(|i| outlines[i].to_vec())
         .collect();
-    let poly = bridge_holes(&outlines[outer], holes, &to2);
+    let poly = bridge_holes(outlines[outer], holes, &to2);
     let pts: Vec<[f64; 2]> = poly.iter().map(|&c| to2(c)).collect();
     let mut tris = Vec::new();
     for t in ear_clip(&pts) {
@@ -721,8 +759,16 @@ pub(crate) type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
 
 /// The polygon mesh of a partition with its planes, and its triangles (in the polygons'
 /// planes); corners index into one shared list.
-pub fn build(s: &Surface<'_>, labels: &[u32], planes: &[Plane]) -> Result<Built, Defect> {
-    let mut regions = Regions::default();
+pub fn build(
+    s: &Surface<'_>,
+    labels: &[u32],
+    planes: &[Plane],
+    close_handles: bool,
+) -> Result<Built, Defect> {
+    let mut regions = Regions {
+        close_handles,
+        ..Default::default()
+    };
     regions.update(s, labels, planes.len());
     build_sized(s, planes, &mut regions)
 }
@@ -752,10 +798,14 @@ fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Resu
     };
     let mut tris: Vec<[u32; 3]> = Vec::new();
     let mut tri_region: Vec<u32> = Vec::new();
-    for (r, region_loops) in regions.loops.iter().enumerate() {
-        let r = r as u32;
-        let region_loops = region_loops.as_deref().unwrap_or_default();
-        let outlines = region_outlines(topo, faces, &regions.labels, &cs, r, region_loops)?;
+    let all: Vec<Loops> = (regions.loops.iter().enumerate())
+        .map(|(r, l)| {
+            let l = l.as_deref().unwrap_or_default();
+            region_outlines(topo, faces, &regions.labels, &cs, r as u32, l)
+        })
+        .collect();
+    for r in 0..all.len() as u32 {
+        let outlines = kept_outlines(&all, r, regions.close_handles)?;
         let (poly, t) = region_polygon(&cs, &planes[r as usize], r, &outlines)?;
         mesh.holes += outlines.len() - 1;
         tri_region.extend(std::iter::repeat_n(r, t.len()));
@@ -791,6 +841,8 @@ pub struct Realised {
     pub dissolved: usize,
     /// Regions added by [`spend_on_two_planes`] (counted in `splits` too).
     pub plane_halvings: usize,
+    /// Whether its polygons may close handles of the input ([`Defect::Handle`]).
+    pub closes_handles: bool,
 }
 
 /// Regions sharing an edge, as sorted pairs.
@@ -855,7 +907,7 @@ impl Fits {
 /// changes one or two regions' faces, and the renumbering after a merge moves none. The
 /// others are summed again in face order, as a scan of every region sums them — the same
 /// values, without reading every face's moments and box on every build.
-#[derive(Default)]
+#[derive(Clone, Default)]
 struct Regions {
     labels: Vec<u32>,
     moments: Vec<Moments>,
@@ -867,6 +919,9 @@ struct Regions {
     /// (it passes over the faces of the regions it sums afresh, the same regions): the
     /// tracing then looks at those faces only, not the whole mesh.
     untraced_faces: Option<Vec<u32>>,
+    /// Whether a loop with no corner between two regions closes a handle ([`outlines`])
+    /// rather than being a defect: set once the realisation has no split left for it.
+    close_handles: bool,
 }
 
 impl Regions {
@@ -1421,28 +1476,102 @@ fn hash_of<T: std::hash::Hash>(list: &[T]) -> u64 {
 /// residual at all (`spend_budget`). `Err` when a defect involves no pair of adjacent
 /// regions left to merge, or [`Defect::Stopped`] once `stop` is set (a realisation made
 /// beside another whose result may make it unnecessary).
+///
+/// Where that ends without a mesh after answering a [`Defect::Handle`] by a merge (merges then
+/// moved the corner-less loop along a tunnel, region after region: a cascade), the search
+/// resumes where it made that merge, with handles closed instead: the polygons on both sides
+/// of such a loop cover it. Only then: a closed handle keeps the tunnel's wall on the plane of
+/// a region around it, which splits and merges elsewhere may fit better.
 pub fn realise(
     s: &Surface<'_>,
-    mut labels: Vec<u32>,
-    mut n: usize,
+    labels: Vec<u32>,
+    n: usize,
     k: usize,
     give_away: bool,
     stop: &AtomicBool,
 ) -> Result<Realised, Defect> {
+    let start = Search::new(labels.clone(), n);
+    match search(s, &labels, start, k, give_away, stop) {
+        Err((d, Some(resume))) => {
+            if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
+                eprintln!("approx outline: resumed with handles closed (it ended at: {d})");
+            }
+            search(s, &labels, *resume, k, give_away, stop)
+        }
+        r => r,
+    }
+    .map_err(|(d, _)| d)
+}
+
+/// Where [`realise`]'s search stands: the partition, what was done to it, and the regions'
+/// values kept across builds.
+#[derive(Clone)]
+struct Search {
+    labels: Vec<u32>,
+    n: usize,
+    defects: Vec<Defect>,
+    splits: usize,
+    merges: usize,
+    unpinched: usize,
+    late_splits: usize,
+    swaps: usize,
+    dissolved: usize,
+    seen: HashSet<u64>,
+    unsplittable: Vec<bool>,
+    regions: Regions,
+}
+
+impl Search {
+    fn new(labels: Vec<u32>, n: usize) -> Search {
+        Search {
+            labels,
+            n,
+            defects: Vec::new(),
+            splits: 0,
+            merges: 0,
+            unpinched: 0,
+            late_splits: 0,
+            swaps: 0,
+            dissolved: 0,
+            seen: HashSet::new(),
+            unsplittable: vec![false; n],
+            regions: Regions::default(),
+        }
+    }
+}
+
+/// [`realise`] from `at`, `start_labels` the partition it was given; on failure, where to
+/// resume with handles closed (see [`realise`]), if a handle was merged.
+fn search(
+    s: &Surface<'_>,
+    start_labels: &[u32],
+    at: Search,
+    k: usize,
+    give_away: bool,
+    stop: &AtomicBool,
+) -> Result<Realised, (Defect, Option<Box<Search>>)> {
     let (topo, faces) = (s.topo, s.faces);
     let face_moments = &s.moments[..];
     let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
-    let (mut defects, mut splits, mut merges, mut unpinched) = (Vec::new(), 0, 0, 0);
-    let (mut late_splits, mut swaps) = (0, 0);
-    let mut dissolved = 0;
-    let start_labels = labels.clone();
-    let mut seen = HashSet::new();
-    let mut unsplittable: Vec<bool> = vec![false; n];
-    let mut regions = Regions::default();
+    let Search {
+        mut labels,
+        mut n,
+        mut defects,
+        mut splits,
+        mut merges,
+        mut unpinched,
+        mut late_splits,
+        mut swaps,
+        mut dissolved,
+        mut seen,
+        mut unsplittable,
+        mut regions,
+    } = at;
+    let mut resume = None;
     let stopped = || stop.load(Ordering::Relaxed);
     let (mut polygons, mut triangles, mut triangle_region) = loop {
         if stopped() {
-            return Err(Defect::Stopped);
+            return Err((Defect::Stopped, None));
         }
         regions.update(s, &labels, n);
         let fits = regions.fits(s.rule);
@@ -1517,6 +1646,28 @@ pub fn realise(
                 }
             }
         }
+        // The first handle merged: where to resume with handles closed should the merges that
+        // follow end without a mesh.
+        if matches!(defect, Defect::Handle { .. }) && resume.is_none() {
+            let mut regions = regions.clone();
+            regions.close_handles = true;
+            let mut defects = defects.clone();
+            defects.push(defect.clone());
+            resume = Some(Box::new(Search {
+                labels: labels.clone(),
+                n,
+                defects,
+                splits,
+                merges,
+                unpinched,
+                late_splits,
+                swaps,
+                dissolved,
+                seen: seen.clone(),
+                unsplittable: unsplittable.clone(),
+                regions,
+            }));
+        }
         let pairs = adjacent_pairs(topo, &labels);
         let both: Vec<(u32, u32)> = pairs
             .iter()
@@ -1556,7 +1707,7 @@ pub fn realise(
                 merge(&mut labels, keep, gone);
                 unsplittable.remove(gone as usize);
             }
-            _ => return Err(defect),
+            _ => return Err((defect, resume)),
         }
         n -= 1;
         merges += 1;
@@ -1578,7 +1729,7 @@ pub fn realise(
     // they are realisable now.
     let mut tried = HashSet::new();
     while n < k && !stopped() {
-        let built = resplit(s, &mut regions, &start_labels, &mut labels, n, &mut tried);
+        let built = resplit(s, &mut regions, start_labels, &mut labels, n, &mut tried);
         let Some(built) = built else { break };
         (polygons, triangles, triangle_region) = built;
         n += 1;
@@ -1591,7 +1742,7 @@ pub fn realise(
     // Stopped while spending the budget: the phases ended early, the result is not this
     // partition's realisation.
     if stopped() {
-        return Err(Defect::Stopped);
+        return Err((Defect::Stopped, None));
     }
     splits += n - before;
     regions.update(s, &labels, n);
@@ -1608,6 +1759,7 @@ pub fn realise(
         unpinched,
         dissolved,
         plane_halvings: 0,
+        closes_handles: regions.close_handles,
     })
 }
 
@@ -1626,7 +1778,11 @@ pub fn realise(
 /// second one too (why: [`super::lloyd::Planes`]'s `AXES`).
 pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize {
     let (before, mut n) = (r.planes.len(), r.planes.len());
-    let (mut unsplittable, mut regions) = (vec![false; n], Regions::default());
+    let mut unsplittable = vec![false; n];
+    let mut regions = Regions {
+        close_handles: r.closes_handles,
+        ..Default::default()
+    };
     let planes = super::lloyd::Planes {
         moments: &s.moments,
         rule: s.rule,
@@ -1933,7 +2089,7 @@ mod tests {
             vertices: [2, 3],
             regions,
         };
-        assert_eq!(build(&s, &labels, &planes).err(), Some(touching));
+        assert_eq!(build(&s, &labels, &planes, false).err(), Some(touching));
     }
 
     /// A realisation whose stop flag is set gives no polygon mesh (its result is not wanted);
@@ -2008,7 +2164,7 @@ mod tests {
     #[test]
     fn euler_characteristic_counts_a_bridged_hole_as_a_hole() {
         on_cube(|s, sides| {
-            let (poly, _, _) = build(s, sides, &fit_planes(s, sides, 6)).unwrap();
+            let (poly, _, _) = build(s, sides, &fit_planes(s, sides, 6), false).unwrap();
             assert_eq!(poly.euler_characteristic(), 2);
         });
         let square = |r: f64| [[-r, -r], [r, -r], [r, r], [-r, r]];

@@ -136,7 +136,7 @@ pub(super) fn relabel(
         if !regions_connected(topo, &labels) {
             break;
         }
-        let named = match build_checked(surface, &labels, &r.planes, diag) {
+        let named = match build_checked(surface, &labels, &r.planes, r.closes_handles, diag) {
             Ok((polygons, triangles, triangle_region)) => {
                 if trace {
                     eprintln!(
