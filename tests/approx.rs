@@ -633,7 +633,8 @@ fn a_run_whose_nearest_draw_lost_its_planes_ends_as_near_as_each_try_alone() {
 }
 
 /// Restarts: seeds after the tries are run only while no partition was realised; when none
-/// is, the error says which seeds were tried and nothing is returned. (A tube in two regions
+/// is, the error says which seeds were tried, whether other seeds could help (not where every
+/// seed drew the same partition), and nothing is returned. (A tube in two regions
 /// cannot be realised: the two halves' planes are parallel, and the tube in one region has an
 /// outline that crosses itself in any plane.)
 #[test]
@@ -654,6 +655,22 @@ fn restarts_run_only_while_no_partition_is_realised() {
         Err(e @ ApproxError::Unrealisable(_)) => {
             assert_eq!(e.exit_code(), 1);
             assert!(e.to_string().contains("seeds 1..=4"), "{e}");
+            assert!(e.to_string().contains("more --restarts, may"), "{e}");
+        }
+        other => panic!(
+            "expected no realisable partition, got {:?}",
+            other.map(|o| o.report)
+        ),
+    }
+    // K = 1: every seed draws the one region (a tube, which no plane realises), and the
+    // message does not send the user to more restarts.
+    let one = ApproxOptions { k: 1, ..two };
+    match approximate(&m, &t, &one, &mut |_| {}) {
+        Err(e @ ApproxError::Unrealisable(_)) => {
+            assert!(
+                e.to_string().contains("every seed drew the same partition"),
+                "{e}"
+            );
         }
         other => panic!(
             "expected no realisable partition, got {:?}",

@@ -386,7 +386,7 @@ fn best_run(
     let t = Instant::now();
     let smoothed = smooth(mesh, topo, opts, progress)?;
     let mut surface = outline::Surface::new(topo, mesh, &smoothed.n0, &smoothed.a0);
-    let mut runs = 0;
+    let mut runs = Draws::default();
     // Every region on its least-squares plane first (the nearest plane); where no draw can be
     // realised so, every region on the principal plane its faces face ([`PlaneRule::Facing`]):
     // thin bent regions — a flange's rim, a bolt hole's wall — have their least-squares
@@ -410,13 +410,20 @@ fn best_run(
             "no run of seeds {}..={} gave a valid polygon mesh of the input ({}) with at most \
              K = {} regions on the regions' least-squares planes (the last: {least_squares}), \
              nor of seeds {}..={} on the planes their faces face (the last: {facing}); nothing \
-             was written (a larger K, or more --restarts, may)",
+             was written ({})",
             opts.seed,
             opts.seed.wrapping_add(last as u64),
             topo.describe(),
             opts.k,
             opts.seed,
             opts.seed.wrapping_add(tries_only as u64),
+            // The realisation of a partition is determined by it: other seeds help only where
+            // they draw other partitions.
+            if runs.partitions.len() == 1 {
+                "every seed drew the same partition, so more --restarts cannot help; a larger K may"
+            } else {
+                "a larger K, or more --restarts, may"
+            }
         )),
         e => e,
     })
@@ -428,9 +435,16 @@ fn lost_planes(mean: f64, partition: f64) -> bool {
     mean > 1.25 * partition
 }
 
-/// What one draw gives: its realisation and partition (or why it has none), and the
-/// realisations it made.
-type Drawn = (Result<(Run, Partitioned), ApproxError>, usize);
+/// What one draw gives: its realisation and partition (or why it has none), the realisations
+/// it made, and its partition's fingerprint.
+type Drawn = (Result<(Run, Partitioned), ApproxError>, usize, u64);
+
+/// What the draws of a run made: the realisations, and the partitions drawn (fingerprints).
+#[derive(Default)]
+struct Draws {
+    made: usize,
+    partitions: std::collections::HashSet<u64>,
+}
 
 /// The draws of [`best_run`] on `surface` (its plane rule), seeds `opts.seed ..= opts.seed +
 /// last` at most, the nearest valid one kept and finished; `runs` counts the realisations
@@ -443,7 +457,7 @@ fn best_on(
     smoothed: &Smoothed,
     surface: &outline::Surface<'_>,
     t: Instant,
-    runs: &mut usize,
+    runs: &mut Draws,
     progress: &mut dyn FnMut(Stage),
 ) -> Result<ApproxOutput, ApproxError> {
     let bad = |o: &Run| o.report.flipped_faces + o.report.degenerate_faces;
@@ -516,7 +530,9 @@ fn best_on(
     let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
         let part = partition(mesh, surface, &with_seed(seed), smoothed, progress);
         progress(Stage::Polygons);
-        realised(seed, part)
+        let fingerprint = outline::hash_of(&part.labels);
+        let (out, made) = realised(seed, part);
+        (out, made, fingerprint)
     };
     // Budget a candidate left unused (no region's normal halving could be realised) goes to
     // two-plane halvings, then the planes are refitted and the borders relabelled again; kept
@@ -608,10 +624,11 @@ fn best_on(
     let absorb = |drawn: &mut Vec<(Run, Partitioned)>,
                   unrealised: &mut Option<ApproxError>,
                   made: Vec<Drawn>,
-                  runs: &mut usize|
+                  runs: &mut Draws|
      -> Result<(), ApproxError> {
-        for (out, m) in made {
-            *runs += m;
+        for (out, m, partition) in made {
+            runs.made += m;
+            runs.partitions.insert(partition);
             match out {
                 Ok(d) => drawn.push(d),
                 // Another seed's partition may be realisable.
@@ -672,7 +689,7 @@ fn best_on(
     let mut finished = Vec::with_capacity(tails.len());
     for t in tails {
         let (run, made) = t?;
-        *runs += made;
+        runs.made += made;
         finished.push(run);
     }
     // Unrealisable: the last draw's defect (the caller says which draws failed).
@@ -680,7 +697,7 @@ fn best_on(
         return Err(unrealised.unwrap_or(ApproxError::Unrealisable(String::new())));
     };
     let mut best = finished.swap_remove(b);
-    best.report.runs = *runs;
+    best.report.runs = runs.made;
     best.report.seconds_all_runs = t.elapsed().as_secs_f64();
     Ok(best.into())
 }

@@ -1443,7 +1443,7 @@ impl<'a> Surface<'a> {
 
 /// A fingerprint of a list of labels or faces (64 bits), for the sets of partitions seen or
 /// tried and the record of splits.
-fn hash_of<T: std::hash::Hash>(list: &[T]) -> u64 {
+pub(super) fn hash_of<T: std::hash::Hash>(list: &[T]) -> u64 {
     use std::hash::BuildHasher;
     foldhash::quality::FixedState::with_seed(0).hash_one(list)
 }
