@@ -919,8 +919,9 @@ struct Regions {
     /// (it passes over the faces of the regions it sums afresh, the same regions): the
     /// tracing then looks at those faces only, not the whole mesh.
     untraced_faces: Option<Vec<u32>>,
-    /// Whether a loop with no corner between two regions closes a handle ([`outlines`])
-    /// rather than being a defect: set once the realisation has no split left for it.
+    /// Whether a loop with no corner between two regions is left out of both polygons (a
+    /// handle closed, [`kept_outlines`]) rather than a [`Defect::Handle`]: set where
+    /// [`realise`] resumes after merging a handle ended without a mesh.
     close_handles: bool,
 }
 
