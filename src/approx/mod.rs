@@ -19,7 +19,7 @@
 //!    those corners, triangulated in its plane ([`polygons`]), and the triangles of different
 //!    polygons must not cross ([`intersect`]). Where the planes cannot realise the partition,
 //!    the partition is split, merged or has faces moved — never the positions — and where
-//!    merges along a tunnel whose wall has no planes of its own end without a mesh, the
+//!    that ends without a mesh after meeting a tunnel whose wall has no planes of its own, the
 //!    polygons around it cover it (the handle closed);
 //! 5. `refit`: each plane moved to the one nearest the region's input vertices (least
 //!    absolute distances, the error the run reports) where the polygons built on them stay

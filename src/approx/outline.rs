@@ -921,7 +921,7 @@ struct Regions {
     untraced_faces: Option<Vec<u32>>,
     /// Whether a loop with no corner between two regions is left out of both polygons (a
     /// handle closed, [`kept_outlines`]) rather than a [`Defect::Handle`]: set where
-    /// [`realise`] resumes after merging a handle ended without a mesh.
+    /// [`realise`] resumes after a search that met a handle ended without a mesh.
     close_handles: bool,
 }
 
@@ -1478,11 +1478,11 @@ pub(super) fn hash_of<T: std::hash::Hash>(list: &[T]) -> u64 {
 /// regions left to merge, or [`Defect::Stopped`] once `stop` is set (a realisation made
 /// beside another whose result may make it unnecessary).
 ///
-/// Where that ends without a mesh after answering a [`Defect::Handle`] by a merge (merges then
-/// moved the corner-less loop along a tunnel, region after region: a cascade), the search
-/// resumes where it made that merge, with handles closed instead: the polygons on both sides
-/// of such a loop cover it. Only then: a closed handle keeps the tunnel's wall on the plane of
-/// a region around it, which splits and merges elsewhere may fit better.
+/// Where that ends without a mesh after meeting a [`Defect::Handle`] (typically merges moved
+/// the corner-less loop along a tunnel, region after region: a cascade), the search resumes
+/// where it first met one, with handles closed: the polygons on both sides of such a loop
+/// cover it. Only then: a closed handle keeps the tunnel's wall on the plane of a region
+/// around it, where the splits and merges that answer it may fit the tunnel better.
 pub fn realise(
     s: &Surface<'_>,
     labels: Vec<u32>,
@@ -1542,7 +1542,7 @@ impl Search {
 }
 
 /// [`realise`] from `at`, `start_labels` the partition it was given; on failure, where to
-/// resume with handles closed (see [`realise`]), if a handle was merged.
+/// resume with handles closed (see [`realise`]), if a handle was met.
 fn search(
     s: &Surface<'_>,
     start_labels: &[u32],
@@ -1599,6 +1599,28 @@ fn search(
                 continue;
             }
         }
+        // The first handle met: where to resume with handles closed should the search end
+        // without a mesh.
+        if matches!(defect, Defect::Handle { .. }) && resume.is_none() {
+            let mut regions = regions.clone();
+            regions.close_handles = true;
+            let mut defects = defects.clone();
+            defects.push(defect.clone());
+            resume = Some(Box::new(Search {
+                labels: labels.clone(),
+                n,
+                defects,
+                splits,
+                merges,
+                unpinched,
+                late_splits,
+                swaps,
+                dissolved,
+                seen: seen.clone(),
+                unsplittable: unsplittable.clone(),
+                regions,
+            }));
+        }
         // Splits answer defects before the first merge, and after it on partitions not met
         // before, up to `k` more times with budget left and `k` more with none (a swap: the
         // cheapest merge elsewhere pays for the split): a region that turns too much is made
@@ -1646,28 +1668,6 @@ fn search(
                     continue;
                 }
             }
-        }
-        // The first handle merged: where to resume with handles closed should the merges that
-        // follow end without a mesh.
-        if matches!(defect, Defect::Handle { .. }) && resume.is_none() {
-            let mut regions = regions.clone();
-            regions.close_handles = true;
-            let mut defects = defects.clone();
-            defects.push(defect.clone());
-            resume = Some(Box::new(Search {
-                labels: labels.clone(),
-                n,
-                defects,
-                splits,
-                merges,
-                unpinched,
-                late_splits,
-                swaps,
-                dissolved,
-                seen: seen.clone(),
-                unsplittable: unsplittable.clone(),
-                regions,
-            }));
         }
         let pairs = adjacent_pairs(topo, &labels);
         let both: Vec<(u32, u32)> = pairs
