@@ -664,13 +664,29 @@ fn restarts_run_only_while_no_partition_is_realised() {
     }
     // K = 1: every seed draws the one region (a tube, which no plane realises), and the
     // message does not send the user to more restarts.
-    let one = ApproxOptions { k: 1, ..two };
+    let one = ApproxOptions {
+        k: 1,
+        ..two.clone()
+    };
     match approximate(&m, &t, &one, &mut |_| {}) {
         Err(e @ ApproxError::Unrealisable(_)) => {
             assert!(
                 e.to_string().contains("every seed drew the same partition"),
                 "{e}"
             );
+        }
+        other => panic!(
+            "expected no realisable partition, got {:?}",
+            other.map(|o| o.report)
+        ),
+    } // One seed drawn: nothing says other seeds would draw the same.
+    let single = ApproxOptions {
+        restarts: 0,
+        ..one.clone()
+    };
+    match approximate(&m, &t, &single, &mut |_| {}) {
+        Err(e @ ApproxError::Unrealisable(_)) => {
+            assert!(e.to_string().contains("more --restarts, may"), "{e}");
         }
         other => panic!(
             "expected no realisable partition, got {:?}",

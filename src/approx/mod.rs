@@ -419,7 +419,7 @@ fn best_run(
             opts.seed.wrapping_add(tries_only as u64),
             // The realisation of a partition is determined by it: other seeds help only where
             // they draw other partitions.
-            if runs.partitions.len() == 1 {
+            if runs.seeds_one_partition() {
                 "every seed drew the same partition, so more --restarts cannot help; a larger K may"
             } else {
                 "a larger K, or more --restarts, may"
@@ -436,14 +436,23 @@ fn lost_planes(mean: f64, partition: f64) -> bool {
 }
 
 /// What one draw gives: its realisation and partition (or why it has none), the realisations
-/// it made, and its partition's fingerprint.
-type Drawn = (Result<(Run, Partitioned), ApproxError>, usize, u64);
+/// it made, and its seed and its partition's fingerprint.
+type Drawn = (Result<(Run, Partitioned), ApproxError>, usize, (u64, u64));
 
-/// What the draws of a run made: the realisations, and the partitions drawn (fingerprints).
+/// What the draws of a run made: the realisations, and each seed's partition (fingerprint).
 #[derive(Default)]
 struct Draws {
     made: usize,
-    partitions: std::collections::HashSet<u64>,
+    partitions: std::collections::HashMap<u64, u64>,
+}
+
+impl Draws {
+    /// Whether more than one seed was drawn and all drew the same partition.
+    fn seeds_one_partition(&self) -> bool {
+        let mut p = self.partitions.values();
+        let first = p.next();
+        self.partitions.len() > 1 && p.all(|x| Some(x) == first)
+    }
 }
 
 /// The draws of [`best_run`] on `surface` (its plane rule), seeds `opts.seed ..= opts.seed +
@@ -532,7 +541,7 @@ fn best_on(
         progress(Stage::Polygons);
         let fingerprint = outline::hash_of(&part.labels);
         let (out, made) = realised(seed, part);
-        (out, made, fingerprint)
+        (out, made, (seed, fingerprint))
     };
     // Budget a candidate left unused (no region's normal halving could be realised) goes to
     // two-plane halvings, then the planes are refitted and the borders relabelled again; kept
@@ -626,9 +635,9 @@ fn best_on(
                   made: Vec<Drawn>,
                   runs: &mut Draws|
      -> Result<(), ApproxError> {
-        for (out, m, partition) in made {
+        for (out, m, (seed, partition)) in made {
             runs.made += m;
-            runs.partitions.insert(partition);
+            runs.partitions.insert(seed, partition);
             match out {
                 Ok(d) => drawn.push(d),
                 // Another seed's partition may be realisable.
