@@ -647,7 +647,7 @@ fn region_outlines(
     outlines
 }
 
-/// Region `r`'s polygon outlines out of every region's loops (`all`, [`region_outlines`]): its
+/// Region `r`'s polygon outlines out of each region's loops (`all`, [`region_outlines`]): its
 /// loops with three corners or more. A loop with none, between two regions alone, each with
 /// an outline elsewhere, is a [`Defect::Handle`] or, with `close_handles`, left out of both
 /// polygons (by the orientation check of [`region_polygon`], it is then a hole of both): the
@@ -655,10 +655,14 @@ fn region_outlines(
 /// loop), and a handle of the input through it is closed — the realisation of a tunnel whose
 /// wall has no plane of its own. Any other loop with fewer than three corners is a
 /// [`Defect::Loop`]; a region with no loop, [`Defect::Closed`].
-fn kept_outlines(all: &[Loops], r: u32, close_handles: bool) -> Result<Vec<&[u32]>, Defect> {
-    let has_outline = |r: u32| all[r as usize].iter().any(|o| o.is_ok());
+fn kept_outlines<'a>(
+    all: &impl Fn(u32) -> &'a Loops,
+    r: u32,
+    close_handles: bool,
+) -> Result<Vec<&'a [u32]>, Defect> {
+    let has_outline = |r: u32| all(r).iter().any(|o| o.is_ok());
     let mut out = Vec::new();
-    for lp in &all[r as usize] {
+    for lp in all(r) {
         match lp {
             Ok(ol) => out.push(&ol[..]),
             Err(nb) => match nb[..] {
@@ -798,13 +802,16 @@ fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Resu
     };
     let mut tris: Vec<[u32; 3]> = Vec::new();
     let mut tri_region: Vec<u32> = Vec::new();
-    let all: Vec<Loops> = (regions.loops.iter().enumerate())
-        .map(|(r, l)| {
-            let l = l.as_deref().unwrap_or_default();
-            region_outlines(topo, faces, &regions.labels, &cs, r as u32, l)
+    // Each region's loops, made when first asked for: by its own polygon, or by a neighbour's
+    // handle (most builds end at a defect before the last region).
+    let made: Vec<std::cell::OnceCell<Loops>> = vec![Default::default(); regions.loops.len()];
+    let all = |r: u32| {
+        made[r as usize].get_or_init(|| {
+            let l = regions.loops[r as usize].as_deref().unwrap_or_default();
+            region_outlines(topo, faces, &regions.labels, &cs, r, l)
         })
-        .collect();
-    for r in 0..all.len() as u32 {
+    };
+    for r in 0..made.len() as u32 {
         let outlines = kept_outlines(&all, r, regions.close_handles)?;
         let (poly, t) = region_polygon(&cs, &planes[r as usize], r, &outlines)?;
         mesh.holes += outlines.len() - 1;
