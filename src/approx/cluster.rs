@@ -12,9 +12,7 @@
 use std::cmp::Reverse;
 use std::collections::{BTreeSet, BinaryHeap};
 
-use super::geom::{
-    add, dot, fit_plane, norm, normalize, scale, solve_dense, Plane, PlaneRule, SplitMix, V3,
-};
+use super::geom::{add, dot, fit_plane, normalize, scale, Plane, PlaneRule, SplitMix, V3};
 use crate::mesh::{Topology, NO_FACE};
 
 /// Parameters of [`cluster_faces`].
@@ -353,11 +351,7 @@ pub fn fix_collapsing_faces(
             });
             if let Some(c) = common {
                 // Only move when the face touches c along an edge, so regions stay connected.
-                let touches = topo.face_edges[f].iter().any(|&e| {
-                    let [a, b] = topo.edge_faces[e as usize];
-                    let g = if a as usize == f { b } else { a };
-                    g != NO_FACE && face_cluster[g as usize] == c
-                });
+                let touches = super::lloyd::neighbors(topo, f).any(|g| face_cluster[g] == c);
                 if touches {
                     face_cluster[f] = c;
                     moved += 1;
@@ -377,17 +371,7 @@ pub fn fix_collapsing_faces(
 /// not merged itself, so chains of merges cannot cycle.
 pub fn merge_regions(topo: &Topology, face_cluster: &mut [u32], regions: &[u32], sums: &[V3]) {
     let n = sums.len();
-    let mut adj: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); n];
-    for ef in &topo.edge_faces {
-        if ef[1] == NO_FACE {
-            continue;
-        }
-        let (a, b) = (face_cluster[ef[0] as usize], face_cluster[ef[1] as usize]);
-        if a != b {
-            adj[a as usize].insert(b);
-            adj[b as usize].insert(a);
-        }
-    }
+    let (adj, _) = region_adjacency(topo, face_cluster, n);
     let mut target: Vec<u32> = (0..n as u32).collect();
     let mut receives = vec![false; n];
     let mut merged = vec![false; n];
@@ -419,28 +403,24 @@ pub fn merge_regions(topo: &Topology, face_cluster: &mut [u32], regions: &[u32],
 /// Distance from `x` to the point nearest to it that lies on all `planes` (least squares
 /// when they have no common point; `None` when they do not pin a point down at all).
 fn corner_reach(x: V3, planes: &[Plane]) -> Option<f64> {
-    let mut a = [0.0; 9];
-    let mut b = [0.0; 3];
+    let (mut a, mut b) = ([[0.0; 3]; 3], [0.0; 3]);
     for p in planes {
         let r = p.signed_distance(x);
         for i in 0..3 {
             b[i] -= p.n[i] * r;
             for j in 0..3 {
-                a[i * 3 + j] += p.n[i] * p.n[j];
+                a[i][j] += p.n[i] * p.n[j];
             }
         }
     }
     // Relative pivot guard: a nearly singular system means a corner far away or at infinity.
-    let (vals, _) = crate::linalg::small::sym_eigen::<3>(&[
-        [a[0], a[1], a[2]],
-        [a[3], a[4], a[5]],
-        [a[6], a[7], a[8]],
-    ]);
+    let (vals, vecs) = crate::linalg::small::sym_eigen::<3>(&a);
     if vals[2] < 1e-9 {
         return None;
     }
-    solve_dense(&mut a, &mut b, 3)?;
-    Some(norm(b))
+    // The step solving A s = b, in A's orthonormal eigenvectors: its length.
+    let along = |j: usize| dot([vecs[0][j], vecs[1][j], vecs[2][j]], b) / vals[j];
+    Some((0..3).map(|j| along(j).powi(2)).sum::<f64>().sqrt())
 }
 
 /// Where three or more regions meet at a vertex, the vertex must go to their planes' common
@@ -623,5 +603,17 @@ mod tests {
         let to_small = (1.0f64).atan2(3.0);
         let expect = (0.1 + to_small).max(std::f64::consts::FRAC_PI_2 - to_small);
         assert!((c - expect).abs() < 1e-12);
+    }
+
+    #[test]
+    fn corner_reach_is_the_distance_to_the_common_point_and_none_for_parallel_planes() {
+        let plane = |n: V3, d: f64| Plane { n, d };
+        let (x, y, z) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+        // x = 1, y = 2, z = 2 meet at (1, 2, 2), 3 from the origin.
+        let three = [plane(x, -1.0), plane(y, -2.0), plane(z, -2.0)];
+        let d = corner_reach([0.0; 3], &three).unwrap();
+        assert!((d - 3.0).abs() < 1e-12, "{d}");
+        // Two planes meet in a line: no point is pinned down.
+        assert!(corner_reach([0.0; 3], &three[..2]).is_none());
     }
 }

@@ -216,41 +216,6 @@ pub fn mean_edge_length(pos: &[V3], edges: &[[u32; 2]]) -> f64 {
     s / edges.len() as f64
 }
 
-/// Solves the small dense system A x = b (row-major n×n) by Gaussian elimination with partial
-/// pivoting; `None` when a pivot vanishes.
-pub fn solve_dense(a: &mut [f64], b: &mut [f64], n: usize) -> Option<()> {
-    for col in 0..n {
-        let piv =
-            (col..n).max_by(|&i, &j| a[i * n + col].abs().total_cmp(&a[j * n + col].abs()))?;
-        if a[piv * n + col].abs() < 1e-300 {
-            return None;
-        }
-        if piv != col {
-            for k in 0..n {
-                a.swap(piv * n + k, col * n + k);
-            }
-            b.swap(piv, col);
-        }
-        for r in col + 1..n {
-            let f = a[r * n + col] / a[col * n + col];
-            if f != 0.0 {
-                for k in col..n {
-                    a[r * n + k] -= f * a[col * n + k];
-                }
-                b[r] -= f * b[col];
-            }
-        }
-    }
-    for col in (0..n).rev() {
-        let mut s = b[col];
-        for k in col + 1..n {
-            s -= a[col * n + k] * b[k];
-        }
-        b[col] = s / a[col * n + col];
-    }
-    Some(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -359,21 +324,5 @@ mod tests {
         assert!(dot(end.n, b.n) > 1.0 - 1e-15 && (end.d - b.d).abs() < 1e-12);
         let mid = blend_planes(&a, &b, 0.5);
         assert!((norm(mid.n) - 1.0).abs() < 1e-15 && mid.n[1] > 0.0 && mid.n[1] < b.n[1]);
-    }
-
-    #[test]
-    fn dense_solve_matches_a_known_solution_and_reports_singular() {
-        let mut a = [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
-        let x = [1.0, -2.0, 0.5];
-        let mut b = [0.0; 3];
-        for i in 0..3 {
-            b[i] = (0..3).map(|j| a[i * 3 + j] * x[j]).sum();
-        }
-        assert!(solve_dense(&mut a, &mut b, 3).is_some());
-        for i in 0..3 {
-            assert!((b[i] - x[i]).abs() < 1e-12);
-        }
-        let mut s = [1.0, 2.0, 2.0, 4.0];
-        assert!(solve_dense(&mut s, &mut [1.0, 1.0], 2).is_none());
     }
 }

@@ -246,9 +246,7 @@ fn star(topo: &Topology, faces: &[[u32; 3]], v: u32) -> (Vec<u32>, bool) {
     };
     let slot = |f: u32| faces[f as usize].iter().position(|&x| x == v).unwrap_or(0);
     let across = |f: u32, side: usize| {
-        let e = topo.face_edges[f as usize][side] as usize;
-        let [a, b] = topo.edge_faces[e];
-        let g = if a == f { b } else { a };
+        let g = topo.face_faces[f as usize][side];
         (g != NO_FACE).then_some(g)
     };
     // Counter-clockwise from f = (v, p, q): the face across the side q → v.
@@ -868,46 +866,6 @@ fn adjacent_pairs(topo: &Topology, labels: &[u32]) -> Vec<(u32, u32)> {
     p
 }
 
-/// Each region's moments and fitted plane with its residual.
-struct Fits {
-    region: Vec<Moments>,
-    fit: Vec<(Plane, f64)>,
-    rule: PlaneRule,
-}
-
-impl Fits {
-    /// The fits of `s`'s faces under `labels`, by the surface's plane rule.
-    fn new(s: &Surface<'_>, labels: &[u32], n: usize) -> Fits {
-        let mut regions = Regions::default();
-        regions.update(s, labels, n);
-        regions.fits(s.rule)
-    }
-
-    /// The plane of faces with moments `m` and its residual, by the same rule.
-    fn of(&self, m: &Moments) -> (Plane, f64) {
-        fit_or_flat(m, self.rule)
-    }
-
-    fn planes(&self) -> Vec<Plane> {
-        self.fit.iter().map(|f| f.0).collect()
-    }
-
-    /// How much worse the merged region fits than the two apart.
-    fn merge_cost(&self, (a, b): (u32, u32)) -> f64 {
-        let merged = self.region[a as usize].add(&self.region[b as usize]);
-        self.of(&merged).1 - self.fit[a as usize].1 - self.fit[b as usize].1
-    }
-
-    /// The adjacent pair among `pairs` whose merge costs least (each cost a plane fit,
-    /// computed once per pair).
-    fn cheapest(&self, pairs: impl Iterator<Item = (u32, u32)>) -> Option<(u32, u32)> {
-        pairs
-            .map(|p| (self.merge_cost(p), p))
-            .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
-            .map(|(_, p)| p)
-    }
-}
-
 /// Each region's moments, plane fit and bounding box under the labels of the last
 /// [`Regions::update`], kept across the builds of one realisation. A region whose faces are
 /// exactly one region's faces of last time keeps that region's values: a split or a merge
@@ -930,11 +888,21 @@ struct Regions {
     /// handle closed, [`kept_outlines`]) rather than a [`Defect::Handle`]: set where
     /// [`realise`] resumes after a search that met a handle ended without a mesh.
     close_handles: bool,
+    /// The surface's plane rule at the last update (by which `fit` was made).
+    rule: PlaneRule,
 }
 
 impl Regions {
+    /// The values of the regions `0..n` of `labels` on `s`.
+    fn of(s: &Surface<'_>, labels: &[u32], n: usize) -> Regions {
+        let mut regions = Regions::default();
+        regions.update(s, labels, n);
+        regions
+    }
+
     /// The values of `labels`' regions `0..n`.
     fn update(&mut self, s: &Surface<'_>, labels: &[u32], n: usize) {
+        self.rule = s.rule;
         // Per old region the one new region all its faces are in, and per new region the one
         // old region all its faces come from (NONE: no face, MANY: more than one).
         const NONE: u32 = u32::MAX;
@@ -1038,13 +1006,28 @@ impl Regions {
         }
     }
 
-    /// The regions' fits (by the plane rule `rule`).
-    fn fits(&self, rule: PlaneRule) -> Fits {
-        Fits {
-            region: self.moments.clone(),
-            fit: self.fit.clone(),
-            rule,
-        }
+    /// The plane of faces with moments `m` and its residual, by the regions' rule.
+    fn fit_of(&self, m: &Moments) -> (Plane, f64) {
+        fit_or_flat(m, self.rule)
+    }
+
+    fn planes(&self) -> Vec<Plane> {
+        self.fit.iter().map(|f| f.0).collect()
+    }
+
+    /// How much worse the merged region fits than the two apart.
+    fn merge_cost(&self, (a, b): (u32, u32)) -> f64 {
+        let merged = self.moments[a as usize].add(&self.moments[b as usize]);
+        self.fit_of(&merged).1 - self.fit[a as usize].1 - self.fit[b as usize].1
+    }
+
+    /// The adjacent pair among `pairs` whose merge costs least (each cost a plane fit,
+    /// computed once per pair).
+    fn cheapest(&self, pairs: impl Iterator<Item = (u32, u32)>) -> Option<(u32, u32)> {
+        pairs
+            .map(|p| (self.merge_cost(p), p))
+            .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
+            .map(|(_, p)| p)
     }
 
     /// The regions' bounding-box diagonals.
@@ -1072,7 +1055,12 @@ fn fit_or_flat(m: &Moments, rule: PlaneRule) -> (Plane, f64) {
 /// The region a defect asks to split: an outline that crosses itself its own region (a
 /// region that turns too much for one plane), otherwise the named region whose plane fits
 /// worst.
-fn split_target(defect: &Defect, named: &[u32], fits: &Fits, unsplittable: &[bool]) -> Option<u32> {
+fn split_target(
+    defect: &Defect,
+    named: &[u32],
+    fits: &Regions,
+    unsplittable: &[bool],
+) -> Option<u32> {
     if let Defect::Outline { region, .. } = defect {
         if !unsplittable[*region as usize] {
             return Some(*region);
@@ -1161,7 +1149,7 @@ fn region_parts(topo: &Topology, labels: &[u32], r: u32) -> Vec<Vec<u32>> {
 
 /// The faces for which `include` holds, by part connected across the edges between faces
 /// that `joined` joins (each part starts at its lowest face).
-fn parts(
+pub(super) fn parts(
     topo: &Topology,
     n_faces: usize,
     include: impl Fn(usize) -> bool,
@@ -1178,12 +1166,10 @@ fn parts(
         let mut part = Vec::new();
         while let Some(f) = stack.pop() {
             part.push(f);
-            for &e in &topo.face_edges[f as usize] {
-                for g in topo.edge_faces[e as usize] {
-                    if g != NO_FACE && !seen[g as usize] && joined(f as usize, g as usize) {
-                        seen[g as usize] = true;
-                        stack.push(g);
-                    }
+            for g in super::lloyd::neighbors(topo, f as usize) {
+                if !seen[g] && joined(f as usize, g) {
+                    seen[g] = true;
+                    stack.push(g as u32);
                 }
             }
         }
@@ -1205,7 +1191,7 @@ fn parts(
 fn dissolve(
     topo: &Topology,
     face_moments: &[Moments],
-    fits: &Fits,
+    fits: &Regions,
     labels: &[u32],
     r: u32,
 ) -> Option<(Vec<u32>, f64)> {
@@ -1216,7 +1202,7 @@ fn dissolve(
     for &(f, q) in &given {
         out[f] = q;
     }
-    let mut gained = vec![Moments::default(); fits.region.len()];
+    let mut gained = vec![Moments::default(); fits.moments.len()];
     for (f, (&l, &o)) in labels.iter().zip(&out).enumerate() {
         if l == r {
             gained[o as usize] = gained[o as usize].add(&face_moments[f]);
@@ -1224,7 +1210,7 @@ fn dissolve(
     }
     let mut grow = -fits.fit[r as usize].1;
     for (q, g) in gained.iter().enumerate().filter(|(_, g)| g.area > 0.0) {
-        grow += fits.of(&fits.region[q].add(g)).1 - fits.fit[q].1;
+        grow += fits.fit_of(&fits.moments[q].add(g)).1 - fits.fit[q].1;
     }
     for l in out.iter_mut() {
         if *l > r {
@@ -1498,7 +1484,12 @@ pub fn realise(
     give_away: bool,
     stop: &AtomicBool,
 ) -> Result<Realised, Defect> {
-    let start = Search::new(labels.clone(), n);
+    let start = Search {
+        labels: labels.clone(),
+        n,
+        unsplittable: vec![false; n],
+        ..Default::default()
+    };
     match search(s, &labels, start, k, give_away, stop) {
         Err((d, Some(resume))) => {
             if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
@@ -1513,7 +1504,7 @@ pub fn realise(
 
 /// Where [`realise`]'s search stands: the partition, what was done to it, and the regions'
 /// values kept across builds.
-#[derive(Clone)]
+#[derive(Clone, Default)]
 struct Search {
     labels: Vec<u32>,
     n: usize,
@@ -1529,31 +1520,12 @@ struct Search {
     regions: Regions,
 }
 
-impl Search {
-    fn new(labels: Vec<u32>, n: usize) -> Search {
-        Search {
-            labels,
-            n,
-            defects: Vec::new(),
-            splits: 0,
-            merges: 0,
-            unpinched: 0,
-            late_splits: 0,
-            swaps: 0,
-            dissolved: 0,
-            seen: HashSet::new(),
-            unsplittable: vec![false; n],
-            regions: Regions::default(),
-        }
-    }
-}
-
-/// [`realise`] from `at`, `start_labels` the partition it was given; on failure, where to
+/// [`realise`] from `st`, `start_labels` the partition it was given; on failure, where to
 /// resume with handles closed (see [`realise`]), if a handle was met.
 fn search(
     s: &Surface<'_>,
     start_labels: &[u32],
-    at: Search,
+    mut st: Search,
     k: usize,
     give_away: bool,
     stop: &AtomicBool,
@@ -1561,72 +1533,43 @@ fn search(
     let (topo, faces) = (s.topo, s.faces);
     let face_moments = &s.moments[..];
     let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
-    let Search {
-        mut labels,
-        mut n,
-        mut defects,
-        mut splits,
-        mut merges,
-        mut unpinched,
-        mut late_splits,
-        mut swaps,
-        mut dissolved,
-        mut seen,
-        mut unsplittable,
-        mut regions,
-    } = at;
     let mut resume = None;
     let stopped = || stop.load(Ordering::Relaxed);
     let (mut polygons, mut triangles, mut triangle_region) = loop {
         if stopped() {
             return Err((Defect::Stopped, None));
         }
-        regions.update(s, &labels, n);
-        let fits = regions.fits(s.rule);
-        let defect = match build_sized(s, &fits.planes(), &mut regions) {
+        st.regions.update(s, &st.labels, st.n);
+        let defect = match build_sized(s, &st.regions.planes(), &mut st.regions) {
             Ok(x) => break x,
             Err(d) => d,
         };
         if trace {
-            eprintln!("approx outline: {n} regions: {defect}");
+            eprintln!("approx outline: {} regions: {defect}", st.n);
         }
-        let named = defect.regions();
-        let fresh = seen.insert(hash_of(&labels));
+        let (named, fits) = (defect.regions(), &st.regions);
+        let fresh = st.seen.insert(hash_of(&st.labels));
         // The seen set rules out cycles of wedge moves; the count (one per vertex) bounds a
         // long walk through partitions not seen before.
         if let Defect::Pinch { vertex, twice, .. } = defect {
-            let mut trial = labels.clone();
-            if unpinched < topo.n_vertices
+            let mut trial = st.labels.clone();
+            if st.unpinched < topo.n_vertices
                 && unpinch(topo, faces, &mut trial, vertex, twice)
-                && !seen.contains(&hash_of(&trial))
+                && !st.seen.contains(&hash_of(&trial))
             {
-                labels = trial;
-                unpinched += 1;
-                defects.push(defect);
+                st.labels = trial;
+                st.unpinched += 1;
+                st.defects.push(defect);
                 continue;
             }
         }
         // The first handle met: where to resume with handles closed should the search end
         // without a mesh.
         if matches!(defect, Defect::Handle { .. }) && resume.is_none() {
-            let mut regions = regions.clone();
-            regions.close_handles = true;
-            let mut defects = defects.clone();
-            defects.push(defect.clone());
-            resume = Some(Box::new(Search {
-                labels: labels.clone(),
-                n,
-                defects,
-                splits,
-                merges,
-                unpinched,
-                late_splits,
-                swaps,
-                dissolved,
-                seen: seen.clone(),
-                unsplittable: unsplittable.clone(),
-                regions,
-            }));
+            let mut at = st.clone();
+            at.regions.close_handles = true;
+            at.defects.push(defect.clone());
+            resume = Some(Box::new(at));
         }
         // Splits answer defects before the first merge, and after it on partitions not met
         // before, up to `k` more times with budget left and `k` more with none (a swap: the
@@ -1634,49 +1577,49 @@ fn search(
         // worse by merging its neighbours into it. The two are counted apart because they
         // are different moves — a swap keeps the region count, a late split raises it — and
         // the caps end the alternation of splits and merges.
-        let used = if n < k { late_splits } else { swaps };
-        if merges == 0 || (fresh && used < k) {
-            if merges > 0 {
-                if n < k {
-                    late_splits += 1;
+        let used = if st.n < k { st.late_splits } else { st.swaps };
+        if st.merges == 0 || (fresh && used < k) {
+            if st.merges > 0 {
+                if st.n < k {
+                    st.late_splits += 1;
                 } else {
-                    swaps += 1;
+                    st.swaps += 1;
                 }
             }
-            if let Some(r) = split_target(&defect, &named, &fits, &unsplittable) {
-                if n < k {
-                    if s.split(&mut labels, r, n) {
-                        n += 1;
-                        splits += 1;
-                        unsplittable.push(false);
+            if let Some(r) = split_target(&defect, &named, fits, &st.unsplittable) {
+                if st.n < k {
+                    if s.split(&mut st.labels, r, st.n) {
+                        st.n += 1;
+                        st.splits += 1;
+                        st.unsplittable.push(false);
                     } else {
-                        unsplittable[r as usize] = true;
+                        st.unsplittable[r as usize] = true;
                     }
-                    defects.push(defect);
+                    st.defects.push(defect);
                     continue;
                 }
-                let pairs = adjacent_pairs(topo, &labels);
+                let pairs = adjacent_pairs(topo, &st.labels);
                 let elsewhere = pairs
                     .into_iter()
                     .filter(|(a, b)| !named.contains(a) && !named.contains(b));
                 if let (true, Some((keep, gone))) = (fresh, fits.cheapest(elsewhere)) {
-                    let mut trial = labels.clone();
+                    let mut trial = st.labels.clone();
                     merge(&mut trial, keep, gone);
                     let moved = if r > gone { r - 1 } else { r };
-                    if s.split(&mut trial, moved, n - 1) {
-                        labels = trial;
-                        unsplittable.remove(gone as usize);
-                        unsplittable.push(false);
-                        splits += 1;
+                    if s.split(&mut trial, moved, st.n - 1) {
+                        st.labels = trial;
+                        st.unsplittable.remove(gone as usize);
+                        st.unsplittable.push(false);
+                        st.splits += 1;
                     } else {
-                        unsplittable[r as usize] = true;
+                        st.unsplittable[r as usize] = true;
                     }
-                    defects.push(defect);
+                    st.defects.push(defect);
                     continue;
                 }
             }
         }
-        let pairs = adjacent_pairs(topo, &labels);
+        let pairs = adjacent_pairs(topo, &st.labels);
         let both: Vec<(u32, u32)> = pairs
             .iter()
             .copied()
@@ -1697,30 +1640,42 @@ fn search(
         // takes one of them out of the junction.)
         let given = match &defect {
             Defect::Outline { region, .. } if give_away => {
-                dissolve(topo, face_moments, &fits, &labels, *region).map(|d| (*region, d))
+                dissolve(topo, face_moments, fits, &st.labels, *region).map(|d| (*region, d))
             }
             _ => None,
         };
         let merge_cost = pick.map_or(f64::INFINITY, |p| fits.merge_cost(p));
         match (pick, given) {
             (_, Some((r, (trial, cost)))) if cost < merge_cost => {
-                labels = trial;
-                unsplittable.remove(r as usize);
-                dissolved += 1;
+                st.labels = trial;
+                st.unsplittable.remove(r as usize);
+                st.dissolved += 1;
                 if trace {
                     eprintln!("approx outline: region {r} given away");
                 }
             }
             (Some((keep, gone)), _) => {
-                merge(&mut labels, keep, gone);
-                unsplittable.remove(gone as usize);
+                merge(&mut st.labels, keep, gone);
+                st.unsplittable.remove(gone as usize);
             }
             _ => return Err((defect, resume)),
         }
-        n -= 1;
-        merges += 1;
-        defects.push(defect);
+        st.n -= 1;
+        st.merges += 1;
+        st.defects.push(defect);
     };
+    let Search {
+        mut labels,
+        mut n,
+        defects,
+        mut splits,
+        merges,
+        unpinched,
+        dissolved,
+        mut unsplittable,
+        mut regions,
+        ..
+    } = st;
     // The budget left: first where it removes curvature (a split that keeps at most a
     // quarter of the region's residual), then the boundaries the merges removed, then wherever
     // it lowers the residual at all.
@@ -1754,7 +1709,7 @@ fn search(
     }
     splits += n - before;
     regions.update(s, &labels, n);
-    let planes = regions.fits(s.rule).planes();
+    let planes = regions.planes();
     Ok(Realised {
         polygons,
         triangles,
@@ -1841,27 +1796,27 @@ fn spend_budget<M: super::lloyd::Metric>(
 ) -> Option<Built> {
     let mut last = None;
     regions.update(s, labels, *n);
-    let mut fits = regions.fits(s.rule);
+    let mut fit = regions.fit.clone();
     while *n < k && !stop.load(Ordering::Relaxed) {
         let Some(worst) = (0..*n)
-            .filter(|&r| !unsplittable[r] && fits.fit[r].1 > 0.0)
-            .max_by(|&a, &b| fits.fit[a].1.total_cmp(&fits.fit[b].1))
+            .filter(|&r| !unsplittable[r] && fit[r].1 > 0.0)
+            .max_by(|&a, &b| fit[a].1.total_cmp(&fit[b].1))
         else {
             break;
         };
-        let was = fits.fit[worst].1;
+        let was = fit[worst].1;
         let tried = (0..M::AXES).find_map(|axis| {
             let (mut trial, c, new) = (labels.clone(), worst as u32, *n as u32);
             if !super::lloyd::halve(s.topo, metric, &mut trial, c, new, 10, axis) {
                 return None;
             }
             regions.update(s, &trial, *n + 1);
-            let after = regions.fits(s.rule);
-            let kept = after.fit[worst].1 + after.fit[*n].1;
+            let kept = regions.fit[worst].1 + regions.fit[*n].1;
             if kept > keep * was || kept >= was {
                 return None;
             }
-            build_sized(s, &after.planes(), regions)
+            let after = regions.fit.clone();
+            build_sized(s, &regions.planes(), regions)
                 .ok()
                 .map(|b| (trial, b, after))
         });
@@ -1869,7 +1824,7 @@ fn spend_budget<M: super::lloyd::Metric>(
             Some((trial, b, after)) => {
                 *labels = trial;
                 *n += 1;
-                fits = after;
+                fit = after;
                 unsplittable.push(false);
                 last = Some(b);
             }
@@ -1901,7 +1856,7 @@ fn resplit(
 ) -> Option<Built> {
     let face_moments = &s.moments[..];
     regions.update(s, labels, n);
-    let fits = regions.fits(s.rule);
+    let fits = &*regions;
     // Each connected part of a given region that one region holds, unless it is all of it
     // (whether the rest stays connected is checked when the candidate is tried).
     let pieces = parts(
@@ -1916,11 +1871,11 @@ fn resplit(
         let pm = part
             .iter()
             .fold(Moments::default(), |m, &f| m.add(&face_moments[f as usize]));
-        if pm.area >= fits.region[r].area * (1.0 - 1e-12) {
+        if pm.area >= fits.moments[r].area * (1.0 - 1e-12) {
             continue; // the whole region
         }
-        let rest = fits.region[r].sub(&pm);
-        let gain = fits.fit[r].1 - fits.of(&pm).1 - fits.of(&rest).1;
+        let rest = fits.moments[r].sub(&pm);
+        let gain = fits.fit[r].1 - fits.fit_of(&pm).1 - fits.fit_of(&rest).1;
         candidates.push((gain, part));
     }
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
@@ -1945,8 +1900,7 @@ fn resplit(
             continue;
         }
         regions.update(s, &trial, n + 1);
-        let planes = regions.fits(s.rule).planes();
-        if let Ok(built) = build_sized(s, &planes, regions) {
+        if let Ok(built) = build_sized(s, &regions.planes(), regions) {
             labels.copy_from_slice(&trial);
             return Some(built);
         }
@@ -1957,7 +1911,7 @@ fn resplit(
 /// Each region's plane: its faces' principal plane that the surface's rule picks (the
 /// least-squares one unless the draws fell back to [`PlaneRule::Facing`]).
 pub fn fit_planes(s: &Surface<'_>, labels: &[u32], n: usize) -> Vec<Plane> {
-    Fits::new(s, labels, n).planes()
+    Regions::of(s, labels, n).planes()
 }
 
 /// Connected components of the mesh without and with a border: a polygon mesh of it needs at
@@ -2028,9 +1982,9 @@ mod tests {
                 for (f, &r) in labels.iter().enumerate() {
                     fresh[r as usize] = fresh[r as usize].add(&s.moments[f]);
                 }
-                let kept = regions.fits(s.rule);
+                let kept = &*regions;
                 for r in 0..n {
-                    assert_eq!(kept.region[r], fresh[r], "region {r}");
+                    assert_eq!(kept.moments[r], fresh[r], "region {r}");
                     let fit = fit_or_flat(&fresh[r], s.rule);
                     assert_eq!(kept.fit[r].1.to_bits(), fit.1.to_bits());
                     assert_eq!(kept.fit[r].0.n, fit.0.n);
@@ -2259,7 +2213,7 @@ mod tests {
                     }
                 })
                 .collect();
-            let fits = Fits::new(s, &labels, 7);
+            let fits = Regions::of(s, &labels, 7);
             let band = fits.fit[6].1;
             assert!(band > 1e-4, "{band}");
             let (out, grow) = dissolve(s.topo, &s.moments, &fits, &labels, 6).unwrap();

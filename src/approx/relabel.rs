@@ -52,21 +52,14 @@ pub(super) fn relabel(
     for _pass in 0..2 {
         for f in 0..faces.len() {
             let a = labels[f];
-            let nbrs: Vec<u32> = topo.face_edges[f]
-                .iter()
-                .filter_map(|&e| {
-                    let [g, h] = topo.edge_faces[e as usize];
-                    let o = if g as usize == f { h } else { g };
-                    (o != crate::mesh::NO_FACE).then_some(o)
-                })
-                .collect();
+            let nbrs: Vec<usize> = super::lloyd::neighbors(topo, f).collect();
             // A leaf of its region (one neighbour in it): moving it cannot disconnect it.
-            if nbrs.iter().filter(|&&g| labels[g as usize] == a).count() != 1 {
+            if nbrs.iter().filter(|&&g| labels[g] == a).count() != 1 {
                 continue;
             }
             let mut best = (0.0, u32::MAX);
             for &g in &nbrs {
-                let b = labels[g as usize];
+                let b = labels[g];
                 if b == a {
                     continue;
                 }
@@ -133,7 +126,7 @@ pub(super) fn relabel(
         }
         // Undoing a move can strand a face that moved in through it: every region must
         // still be one piece, or the whole is dropped.
-        if !regions_connected(topo, &labels) {
+        if !regions_connected(topo, &labels, r.planes.len()) {
             break;
         }
         let named = match build_checked(surface, &labels, &r.planes, r.closes_handles, diag) {
@@ -169,34 +162,9 @@ pub(super) fn relabel(
     false
 }
 
-/// Whether every region's faces are connected across edges.
-fn regions_connected(topo: &crate::mesh::Topology, labels: &[u32]) -> bool {
-    let n = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
-    let mut seen = vec![false; labels.len()];
-    let mut started = vec![false; n];
-    let mut stack = Vec::new();
-    for f0 in 0..labels.len() {
-        if seen[f0] {
-            continue;
-        }
-        let l = labels[f0];
-        if std::mem::replace(&mut started[l as usize], true) {
-            return false; // a second piece of region l
-        }
-        seen[f0] = true;
-        stack.push(f0);
-        while let Some(f) = stack.pop() {
-            for &e in &topo.face_edges[f] {
-                for g in topo.edge_faces[e as usize] {
-                    if g != crate::mesh::NO_FACE && !seen[g as usize] && labels[g as usize] == l {
-                        seen[g as usize] = true;
-                        stack.push(g as usize);
-                    }
-                }
-            }
-        }
-    }
-    true
+/// Whether the faces of the `n` regions of `labels` are `n` pieces connected across edges.
+fn regions_connected(topo: &crate::mesh::Topology, labels: &[u32], n: usize) -> bool {
+    outline::parts(topo, labels.len(), |_| true, |f, g| labels[f] == labels[g]).len() == n
 }
 
 #[cfg(test)]
@@ -253,10 +221,10 @@ mod tests {
         let bad = realised_bad(&r, diag);
         assert!(bad.is_empty());
         assert_eq!(r.polygons.polygons.len(), 2);
-        assert!(regions_connected(&topo, &r.labels));
+        assert!(regions_connected(&topo, &r.labels, 2));
         // A face of region 1 set apart inside region 0 is a second piece of region 1.
         let mut split = r.labels.clone();
         split[0] = 1;
-        assert!(!regions_connected(&topo, &split));
+        assert!(!regions_connected(&topo, &split, 2));
     }
 }
