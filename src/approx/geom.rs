@@ -185,19 +185,25 @@ pub fn blend_planes(a: &Plane, b: &Plane, t: f64) -> Plane {
     }
 }
 
+/// The axis-aligned bounding box `[lo, hi]` of `points` (`lo > hi` where there are none).
+pub fn bounds(points: impl IntoIterator<Item = V3>) -> [V3; 2] {
+    let empty = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+    points.into_iter().fold(empty, |[lo, hi], p| {
+        [
+            [0, 1, 2].map(|k| lo[k].min(p[k])),
+            [0, 1, 2].map(|k| hi[k].max(p[k])),
+        ]
+    })
+}
+
 /// Bounding-box diagonal of the vertices used by faces.
 pub fn bbox_diagonal(mesh: &TriMesh) -> f64 {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for f in &mesh.faces {
-        for &v in f {
-            let p = mesh.positions[v as usize];
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-    }
+    let used = mesh
+        .faces
+        .iter()
+        .flatten()
+        .map(|&v| mesh.positions[v as usize]);
+    let [lo, hi] = bounds(used);
     if lo[0] > hi[0] {
         return 0.0;
     }

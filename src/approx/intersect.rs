@@ -2,7 +2,7 @@
 //! self-intersection (its polygons are planar and share corners exactly, so two of them can
 //! only meet where their corners or edges say, unless their planes cut through each other).
 
-use super::geom::{cross, dot, face_area_normal, normalize, sub, V3};
+use super::geom::{bounds, cross, dot, face_area_normal, normalize, sub, V3};
 use super::polygons::{orient, segments_cross};
 
 /// Six times the signed volume of `a b c d`.
@@ -145,14 +145,7 @@ fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3], tol: f64) -> bool {
 /// are in one plane.
 pub fn first_crossing(pos: &[V3], tris: &[[u32; 3]], region: &[u32], tol: f64) -> Option<[u32; 2]> {
     let bbox = |t: &[u32; 3]| {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for &i in t {
-            for k in 0..3 {
-                lo[k] = lo[k].min(pos[i as usize][k]);
-                hi[k] = hi[k].max(pos[i as usize][k]);
-            }
-        }
+        let [lo, hi] = bounds(t.map(|i| pos[i as usize]));
         // Grown by the tolerance: two triangles in one plane may be apart by noise.
         (lo.map(|x| x - tol), hi.map(|x| x + tol))
     };

@@ -30,7 +30,7 @@ use std::sync::Mutex;
 use foldhash::{HashMap, HashMapExt, HashSet, HashSetExt};
 
 use super::geom::{
-    add, cross, dot, norm, normalize, principal_axis, scale, sub, Plane, PlaneRule, V3,
+    add, bounds, cross, dot, norm, normalize, principal_axis, scale, sub, Plane, PlaneRule, V3,
 };
 use super::intersect::first_crossing;
 use super::polygons::{
@@ -1330,19 +1330,7 @@ impl<'a> Surface<'a> {
             star_start.push(star_faces.len() as u32);
             on_border.push(border);
         }
-        let face_box = faces
-            .iter()
-            .map(|f| {
-                let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-                for &v in f {
-                    for k in 0..3 {
-                        lo[k] = lo[k].min(pos[v as usize][k]);
-                        hi[k] = hi[k].max(pos[v as usize][k]);
-                    }
-                }
-                [lo, hi]
-            })
-            .collect();
+        let face_box = faces.iter().map(|f| bounds(f.map(|v| pos[v as usize])));
         Surface {
             topo,
             pos,
@@ -1352,7 +1340,7 @@ impl<'a> Surface<'a> {
             star_start,
             star_faces,
             on_border,
-            face_box,
+            face_box: face_box.collect(),
             moments: Moments::of_faces(pos, faces),
             tol: 1e-6 * crate::vol::tet::bbox_diagonal(pos),
             rule: PlaneRule::LeastSquares,
