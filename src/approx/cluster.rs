@@ -368,10 +368,10 @@ pub fn fix_collapsing_faces(
 
 /// Merges each listed region into the adjacent region with the closest mean normal (`sums`
 /// are area-weighted normal sums per region). A region that receives a merge in this call is
-/// not merged itself, so chains of merges cannot cycle.
-pub fn merge_regions(topo: &Topology, face_cluster: &mut [u32], regions: &[u32], sums: &[V3]) {
+/// not merged itself, so chains of merges cannot cycle. `adj`: each region's neighbours
+/// ([`region_adjacency`]).
+fn merge_regions(face_cluster: &mut [u32], regions: &[u32], sums: &[V3], adj: &[BTreeSet<u32>]) {
     let n = sums.len();
-    let (adj, _) = region_adjacency(topo, face_cluster, n);
     let mut target: Vec<u32> = (0..n as u32).collect();
     let mut receives = vec![false; n];
     let mut merged = vec![false; n];
@@ -413,7 +413,7 @@ fn corner_reach(x: V3, planes: &[Plane]) -> Option<f64> {
             }
         }
     }
-    // Relative pivot guard: a nearly singular system means a corner far away or at infinity.
+    // A nearly singular system (its smallest eigenvalue) means a corner far away or at infinity.
     let (vals, vecs) = crate::linalg::small::sym_eigen::<3>(&a);
     if vals[2] < 1e-9 {
         return None;
@@ -555,7 +555,7 @@ pub fn merge_collapsing_regions(
             break;
         }
         merges += bad.len();
-        merge_regions(topo, face_cluster, &bad, &sums);
+        merge_regions(face_cluster, &bad, &sums, &adj);
     }
     merges
 }
