@@ -1357,16 +1357,17 @@ impl<'a> Surface<'a> {
     fn split(&self, labels: &mut [u32], r: u32, n: usize) -> bool {
         let faces: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == r).collect();
         let key = hash_of(&faces);
-        let known = self.splits.lock().ok().and_then(|m| m.0.get(&key).cloned());
-        // Another region with the same fingerprint (a collision) would not match: its faces
-        // are made afresh.
-        let matches =
-            |h: &Halves| h.0 == faces.len() && h.2.iter().all(|&f| labels[f as usize] == r);
-        if let Some((_, halved, new)) = known.filter(matches) {
-            for f in new {
-                labels[f as usize] = n as u32;
+        // Replayed under the lock, without a copy of the record. Another region with the same
+        // fingerprint (a collision) would not match: its faces are made afresh.
+        if let Ok(m) = self.splits.lock() {
+            let matches =
+                |h: &&Halves| h.0 == faces.len() && h.2.iter().all(|&f| labels[f as usize] == r);
+            if let Some((_, halved, new)) = m.0.get(&key).filter(matches) {
+                for &f in new {
+                    labels[f as usize] = n as u32;
+                }
+                return *halved;
             }
-            return halved;
         }
         let metric = self.normals_metric();
         let halved =
