@@ -679,7 +679,8 @@ fn restarts_run_only_while_no_partition_is_realised() {
             "expected no realisable partition, got {:?}",
             other.map(|o| o.report)
         ),
-    } // One seed drawn: nothing says other seeds would draw the same.
+    }
+    // One seed drawn: nothing says other seeds would draw the same.
     let single = ApproxOptions {
         restarts: 0,
         ..one.clone()

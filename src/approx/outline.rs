@@ -1330,7 +1330,10 @@ impl<'a> Surface<'a> {
             star_start.push(star_faces.len() as u32);
             on_border.push(border);
         }
-        let face_box = faces.iter().map(|f| bounds(f.map(|v| pos[v as usize])));
+        let face_box = faces
+            .iter()
+            .map(|f| bounds(f.map(|v| pos[v as usize])))
+            .collect();
         Surface {
             topo,
             pos,
@@ -1340,7 +1343,7 @@ impl<'a> Surface<'a> {
             star_start,
             star_faces,
             on_border,
-            face_box: face_box.collect(),
+            face_box,
             moments: Moments::of_faces(pos, faces),
             tol: 1e-6 * crate::vol::tet::bbox_diagonal(pos),
             rule: PlaneRule::LeastSquares,
@@ -1804,10 +1807,9 @@ fn spend_budget<M: super::lloyd::Metric>(
             if kept > keep * was || kept >= was {
                 return None;
             }
-            let after = regions.fit.clone();
-            build_sized(s, &regions.planes(), regions)
-                .ok()
-                .map(|b| (trial, b, after))
+            let built = build_sized(s, &regions.planes(), regions).ok()?;
+            // The residuals of the kept split (building does not change them).
+            Some((trial, built, regions.fit.clone()))
         });
         match tried {
             Some((trial, b, after)) => {

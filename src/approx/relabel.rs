@@ -52,13 +52,13 @@ pub(super) fn relabel(
     for _pass in 0..2 {
         for f in 0..faces.len() {
             let a = labels[f];
-            let nbrs: Vec<usize> = super::lloyd::neighbors(topo, f).collect();
+            let nbrs = || super::lloyd::neighbors(topo, f);
             // A leaf of its region (one neighbour in it): moving it cannot disconnect it.
-            if nbrs.iter().filter(|&&g| labels[g] == a).count() != 1 {
+            if nbrs().filter(|&g| labels[g] == a).count() != 1 {
                 continue;
             }
             let mut best = (0.0, u32::MAX);
-            for &g in &nbrs {
+            for g in nbrs() {
                 let b = labels[g];
                 if b == a {
                     continue;
