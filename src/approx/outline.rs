@@ -850,19 +850,18 @@ pub struct Realised {
     pub closes_handles: bool,
 }
 
-/// Regions sharing an edge, as sorted pairs.
+/// Regions sharing an edge, as sorted pairs (each shared edge met once, each pair sorted once).
 fn adjacent_pairs(topo: &Topology, labels: &[u32]) -> Vec<(u32, u32)> {
-    let mut p: Vec<(u32, u32)> = topo
-        .interior_edges
-        .iter()
-        .filter_map(|&e| {
-            let [f, g] = topo.edge_faces[e as usize];
-            let (a, b) = (labels[f as usize], labels[g as usize]);
-            (a != b).then_some((a.min(b), a.max(b)))
-        })
-        .collect();
+    let mut pairs = HashSet::new();
+    for &e in &topo.interior_edges {
+        let [f, g] = topo.edge_faces[e as usize];
+        let (a, b) = (labels[f as usize], labels[g as usize]);
+        if a != b {
+            pairs.insert((a.min(b), a.max(b)));
+        }
+    }
+    let mut p: Vec<(u32, u32)> = pairs.into_iter().collect();
     p.sort_unstable();
-    p.dedup();
     p
 }
 
@@ -878,12 +877,10 @@ struct Regions {
     moments: Vec<Moments>,
     fit: Vec<(Plane, f64)>,
     boxes: Vec<[V3; 2]>,
+    /// Each region's faces, ascending.
+    members: Vec<Vec<u32>>,
     /// Each region's boundary loops ([`region_loops`]), once a build has traced them.
     loops: Vec<Option<Vec<Vec<u32>>>>,
-    /// The faces (ascending) of every region without loops, when the last update found them
-    /// (it passes over the faces of the regions it sums afresh, the same regions): the
-    /// tracing then looks at those faces only, not the whole mesh.
-    untraced_faces: Option<Vec<u32>>,
     /// Whether a loop with no corner between two regions is left out of both polygons (a
     /// handle closed, [`kept_outlines`]) rather than a [`Defect::Handle`]: set where
     /// [`realise`] resumes after a search that met a handle ended without a mesh.
@@ -908,30 +905,35 @@ impl Regions {
         const NONE: u32 = u32::MAX;
         const MANY: u32 = u32::MAX - 1;
         let mut from = vec![MANY; n];
+        // The faces whose label changed (ascending); `None`: no earlier labels to compare.
+        let mut changed = None;
         if self.labels.len() == labels.len() {
-            // Over the faces whose label changed (few, but for a merge's renumbering); the
-            // others only mark their region as keeping faces (`stays`).
+            // Over the faces whose label changed (few, but for a merge's renumbering); an old
+            // region keeps faces (`stays`) when fewer than all of its faces left it.
             let m = self.moments.len();
-            let (mut to, mut moved, mut stays) = (vec![NONE; m], vec![NONE; n], vec![false; m]);
-            for (&a, &b) in self.labels.iter().zip(labels) {
+            let (mut to, mut moved, mut left) = (vec![NONE; m], vec![NONE; n], vec![0; m]);
+            let mut faces = Vec::new();
+            for (f, (&a, &b)) in self.labels.iter().zip(labels).enumerate() {
                 if a == b {
-                    stays[a as usize] = true;
                     continue;
                 }
+                faces.push(f as u32);
+                left[a as usize] += 1;
                 let t = &mut to[a as usize];
                 *t = if *t == NONE || *t == b { b } else { MANY };
                 let f = &mut moved[b as usize];
                 *f = if *f == NONE || *f == a { a } else { MANY };
             }
+            let stays = |a: usize| self.members[a].len() > left[a];
             for (b, f) in from.iter_mut().enumerate() {
-                let stays_b = b < m && stays[b];
+                let stays_b = b < m && stays(b);
                 *f = match moved[b] {
                     // No face came to b: the old b, if none of its faces left.
                     NONE if stays_b && to[b] == NONE => b as u32,
                     // Every face of b came from a, and every face of a went to b.
                     a if a < MANY
                         && !stays_b
-                        && !stays[a as usize]
+                        && !stays(a as usize)
                         && to[a as usize] == b as u32 =>
                     {
                         a
@@ -939,31 +941,57 @@ impl Regions {
                     _ => MANY,
                 };
             }
+            changed = Some(faces);
         }
-        let empty = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
         // The old region whose values new region `b` keeps.
         let old = |b: usize| (from[b] < MANY).then_some(from[b] as usize);
-        let mut moments: Vec<Moments> = (0..n)
-            .map(|b| old(b).map_or(Moments::default(), |a| self.moments[a]))
-            .collect();
-        let mut boxes: Vec<[V3; 2]> = (0..n)
-            .map(|b| old(b).map_or(empty, |a| self.boxes[a]))
-            .collect();
-        let mut untraced = Vec::new();
-        if (0..n).any(|b| old(b).is_none()) {
-            for (f, &r) in labels.iter().enumerate() {
-                let r = r as usize;
-                if old(r).is_some() {
-                    continue;
+        // Each new region's faces, ascending: a kept region's are the old region's; the others'
+        // are what stays of the old region of their number and the faces that came to them.
+        let mut old_members = std::mem::take(&mut self.members);
+        let mut members: Vec<Vec<u32>> = vec![Vec::new(); n];
+        match &changed {
+            Some(faces) => {
+                for &f in faces {
+                    let b = labels[f as usize] as usize;
+                    if old(b).is_none() {
+                        members[b].push(f);
+                    }
                 }
-                untraced.push(f as u32);
-                moments[r] = moments[r].add(&s.moments[f]);
-                let (bx, fb) = (&mut boxes[r], &s.face_box[f]);
-                for k in 0..3 {
-                    bx[0][k] = bx[0][k].min(fb[0][k]);
-                    bx[1][k] = bx[1][k].max(fb[1][k]);
+                for (b, list) in members.iter_mut().enumerate() {
+                    if let Some(a) = old(b) {
+                        *list = std::mem::take(&mut old_members[a]);
+                    } else if let Some(stayed) = old_members.get(b) {
+                        let stayed = stayed.iter().filter(|&&f| labels[f as usize] == b as u32);
+                        *list = merge_ascending(stayed.copied(), list);
+                    }
                 }
             }
+            None => {
+                for (f, &r) in labels.iter().enumerate() {
+                    members[r as usize].push(f as u32);
+                }
+            }
+        }
+        // The others summed again in face order, as a scan of every region sums them.
+        let empty = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+        let (mut moments, mut boxes) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for (b, list) in members.iter().enumerate() {
+            let (mut m, mut bx) = match old(b) {
+                Some(a) => (self.moments[a], self.boxes[a]),
+                None => (Moments::default(), empty),
+            };
+            if old(b).is_none() {
+                for &f in list {
+                    m = m.add(&s.moments[f as usize]);
+                    let fb = &s.face_box[f as usize];
+                    for k in 0..3 {
+                        bx[0][k] = bx[0][k].min(fb[0][k]);
+                        bx[1][k] = bx[1][k].max(fb[1][k]);
+                    }
+                }
+            }
+            moments.push(m);
+            boxes.push(bx);
         }
         self.fit = (0..n)
             .map(|b| old(b).map_or_else(|| fit_or_flat(&moments[b], s.rule), |a| self.fit[a]))
@@ -973,10 +1001,7 @@ impl Regions {
         self.loops = (0..n)
             .map(|b| old(b).and_then(|a| old_loops[a].take()))
             .collect();
-        // A kept region without loops (not traced since an earlier update) is not among them.
-        self.untraced_faces = (0..n)
-            .all(|b| old(b).is_none() || self.loops[b].is_some())
-            .then_some(untraced);
+        self.members = members;
         self.moments = moments;
         self.boxes = boxes;
         self.labels.clear();
@@ -984,21 +1009,17 @@ impl Regions {
     }
 
     /// Traces the boundary loops ([`region_loops`]) of the regions that have none since their
-    /// faces last changed.
+    /// faces last changed, looking at their faces only.
     fn trace_loops(&mut self, s: &Surface<'_>) {
         let want: Vec<bool> = self.loops.iter().map(Option::is_none).collect();
         if !want.contains(&true) {
             return;
         }
-        let among = self.untraced_faces.take();
-        let traced = region_loops(
-            s.topo,
-            s.faces,
-            &self.labels,
-            want.len(),
-            &want,
-            among.as_deref(),
-        );
+        let among: Vec<u32> = (0..want.len())
+            .filter(|&r| want[r])
+            .flat_map(|r| self.members[r].iter().copied())
+            .collect();
+        let traced = region_loops(s.topo, s.faces, &self.labels, want.len(), &want, &among);
         for ((cached, loops), want) in self.loops.iter_mut().zip(traced).zip(want) {
             if want {
                 *cached = Some(loops);
@@ -1040,6 +1061,20 @@ impl Regions {
             })
             .collect()
     }
+}
+
+/// The union of two ascending lists of distinct faces, ascending.
+fn merge_ascending(a: impl Iterator<Item = u32>, b: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(b.len());
+    let mut b = b.iter().copied().peekable();
+    for x in a {
+        while let Some(y) = b.next_if(|&y| y < x) {
+            out.push(y);
+        }
+        out.push(x);
+    }
+    out.extend(b);
+    out
 }
 
 fn fit_or_flat(m: &Moments, rule: PlaneRule) -> (Plane, f64) {
@@ -1569,6 +1604,9 @@ fn search(
         // worse by merging its neighbours into it. The two are counted apart because they
         // are different moves — a swap keeps the region count, a late split raises it — and
         // the caps end the alternation of splits and merges.
+        // The regions sharing an edge, made once per defect when first asked for.
+        let pairs = std::cell::OnceCell::new();
+        let pairs = || pairs.get_or_init(|| adjacent_pairs(topo, &st.labels));
         let used = if st.n < k { st.late_splits } else { st.swaps };
         if st.merges == 0 || (fresh && used < k) {
             if st.merges > 0 {
@@ -1590,9 +1628,9 @@ fn search(
                     st.defects.push(defect);
                     continue;
                 }
-                let pairs = adjacent_pairs(topo, &st.labels);
-                let elsewhere = pairs
-                    .into_iter()
+                let elsewhere = pairs()
+                    .iter()
+                    .copied()
                     .filter(|(a, b)| !named.contains(a) && !named.contains(b));
                 if let (true, Some((keep, gone))) = (fresh, fits.cheapest(elsewhere)) {
                     let mut trial = st.labels.clone();
@@ -1611,7 +1649,7 @@ fn search(
                 }
             }
         }
-        let pairs = adjacent_pairs(topo, &st.labels);
+        let pairs = pairs();
         let both: Vec<(u32, u32)> = pairs
             .iter()
             .copied()
@@ -1620,7 +1658,8 @@ fn search(
         let pick = if both.is_empty() {
             fits.cheapest(
                 pairs
-                    .into_iter()
+                    .iter()
+                    .copied()
                     .filter(|(a, b)| named.contains(a) || named.contains(b)),
             )
         } else {
@@ -1995,7 +2034,8 @@ mod tests {
                     .collect();
                 assert_eq!(regions.sizes(), sizes);
                 regions.trace_loops(s);
-                let traced = region_loops(s.topo, s.faces, labels, n, &vec![true; n], None);
+                let all: Vec<u32> = (0..labels.len() as u32).collect();
+                let traced = region_loops(s.topo, s.faces, labels, n, &vec![true; n], &all);
                 for (r, loops) in traced.iter().enumerate() {
                     assert_eq!(regions.loops[r].as_ref(), Some(loops), "region {r}'s loops");
                 }

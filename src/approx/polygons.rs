@@ -88,21 +88,23 @@ pub(super) fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2])
 /// normal for the outer loop, clockwise for holes), of the regions `want`s (the others'
 /// lists are left empty). Each region's loops start at its boundary vertices in increasing
 /// order; where a region leaves a vertex by several boundary half-edges, the one of the
-/// latest face goes first. A region's loops depend on its set of faces alone. `among`, when
-/// given, lists (ascending) every face of the wanted regions, and only those are looked at.
+/// latest face goes first. A region's loops depend on its set of faces alone. `among` lists
+/// every face of the wanted regions (each region's ascending: only the order of one region's
+/// faces matters); only those are looked at, so the cost is theirs, not the mesh's.
 pub(super) fn region_loops(
     topo: &Topology,
     faces: &[[u32; 3]],
     fc: &[u32],
     n: usize,
     want: &[bool],
-    among: Option<&[u32]>,
+    among: &[u32],
 ) -> Vec<Vec<Vec<u32>>> {
-    // The boundary half-edges (region, from, to) in face order.
+    // The boundary half-edges (region, from, to), each region's in face order.
     let mut half: Vec<(u32, u32, u32)> = Vec::new();
-    let mut visit = |f: usize| {
+    for &f in among {
+        let f = f as usize;
         if !want[fc[f] as usize] {
-            return;
+            continue;
         }
         let face = &faces[f];
         for (k, &g) in topo.face_faces[f].iter().enumerate() {
@@ -110,10 +112,6 @@ pub(super) fn region_loops(
                 half.push((fc[f], face[k], face[(k + 1) % 3]));
             }
         }
-    };
-    match among {
-        Some(listed) => listed.iter().for_each(|&f| visit(f as usize)),
-        None => (0..faces.len()).for_each(visit),
     }
     // Grouped by source vertex, face order kept within a group (a counting sort: stable, and
     // each vertex's group found by index while the loops are walked).
