@@ -42,6 +42,9 @@ use crate::mesh::{Topology, NO_FACE};
 /// The region of nothing, beyond the mesh's border.
 const OUTSIDE: u32 = u32::MAX;
 
+/// The entries (i, j), i ≤ j, of a symmetric 3 × 3 matrix, by rows.
+const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+
 /// Area moments of a region's faces: the least-squares plane and its residual without
 /// revisiting the faces, and those of two regions merged by adding.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -49,8 +52,10 @@ pub struct Moments {
     area: f64,
     /// ∫ x dA.
     first: V3,
-    /// ∫ x xᵀ dA.
-    second: [[f64; 3]; 3],
+    /// ∫ x xᵀ dA, its upper triangle by rows (xx, xy, xz, yy, yz, zz): the matrix is
+    /// symmetric to the bit (each entry is a sum of products `p_i p_j`, and a product does not
+    /// depend on its order), so a sum of moments adds six entries, not nine.
+    second: [f64; 6],
     /// Σ area-weighted normals (orients the plane).
     normal: V3,
 }
@@ -61,12 +66,8 @@ impl Moments {
         let an = scale(cross(sub(b, a), sub(c, a)), 0.5);
         let area = dot(an, an).sqrt();
         let s = add(add(a, b), c);
-        let mut second = [[0.0; 3]; 3];
-        for (i, row) in second.iter_mut().enumerate() {
-            for (j, x) in row.iter_mut().enumerate() {
-                *x = area / 12.0 * (a[i] * a[j] + b[i] * b[j] + c[i] * c[j] + s[i] * s[j]);
-            }
-        }
+        let second = UPPER
+            .map(|(i, j)| area / 12.0 * (a[i] * a[j] + b[i] * b[j] + c[i] * c[j] + s[i] * s[j]));
         Moments {
             area,
             first: scale(s, area / 3.0),
@@ -105,7 +106,7 @@ impl Moments {
         let neg = Moments {
             area: -o.area,
             first: scale(o.first, -1.0),
-            second: o.second.map(|row| row.map(|x| -x)),
+            second: o.second.map(|x| -x),
             normal: scale(o.normal, -1.0),
         };
         self.add(&neg)
@@ -114,20 +115,25 @@ impl Moments {
     /// The integral of the squared distance to `p` over the faces.
     pub fn sq_distance(&self, p: &Plane) -> f64 {
         let mut c = p.d * p.d * self.area + 2.0 * p.d * dot(p.n, self.first);
+        let second = self.second_matrix();
         for i in 0..3 {
             for j in 0..3 {
-                c += p.n[i] * self.second[i][j] * p.n[j];
+                c += p.n[i] * second[i][j] * p.n[j];
             }
         }
         c
     }
 
+    /// ∫ x xᵀ dA as the full matrix.
+    fn second_matrix(&self) -> [[f64; 3]; 3] {
+        let [xx, xy, xz, yy, yz, zz] = self.second;
+        [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
+    }
+
     pub fn add(&self, o: &Moments) -> Moments {
         let mut second = self.second;
-        for (i, row) in second.iter_mut().enumerate() {
-            for (j, x) in row.iter_mut().enumerate() {
-                *x += o.second[i][j];
-            }
+        for (x, y) in second.iter_mut().zip(&o.second) {
+            *x += y;
         }
         Moments {
             area: self.area + o.area,
@@ -145,7 +151,7 @@ impl Moments {
             return None;
         }
         let c = scale(self.first, 1.0 / self.area);
-        let mut cov = self.second;
+        let mut cov = self.second_matrix();
         for (i, row) in cov.iter_mut().enumerate() {
             for (j, x) in row.iter_mut().enumerate() {
                 *x -= self.area * c[i] * c[j];
