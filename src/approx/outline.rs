@@ -967,8 +967,9 @@ impl Regions {
                     if let Some(a) = old(b) {
                         *list = std::mem::take(&mut old_members[a]);
                     } else if let Some(stayed) = old_members.get(b) {
-                        let stayed = stayed.iter().filter(|&&f| labels[f as usize] == b as u32);
-                        *list = merge_ascending(stayed.copied(), list);
+                        // Two ascending runs: the stable sort merges them in one pass.
+                        list.extend(stayed.iter().filter(|&&f| labels[f as usize] == b as u32));
+                        list.sort();
                     }
                 }
             }
@@ -982,18 +983,16 @@ impl Regions {
         let empty = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
         let (mut moments, mut boxes) = (Vec::with_capacity(n), Vec::with_capacity(n));
         for (b, list) in members.iter().enumerate() {
-            let (mut m, mut bx) = match old(b) {
-                Some(a) => (self.moments[a], self.boxes[a]),
-                None => (Moments::default(), empty),
-            };
-            if old(b).is_none() {
-                for &f in list {
-                    m = m.add(&s.moments[f as usize]);
-                    let fb = &s.face_box[f as usize];
-                    for k in 0..3 {
-                        bx[0][k] = bx[0][k].min(fb[0][k]);
-                        bx[1][k] = bx[1][k].max(fb[1][k]);
-                    }
+            let (mut m, mut bx) = old(b).map_or((Moments::default(), empty), |a| {
+                (self.moments[a], self.boxes[a])
+            });
+            let summed: &[u32] = if old(b).is_none() { list } else { &[] };
+            for &f in summed {
+                m = m.add(&s.moments[f as usize]);
+                let fb = &s.face_box[f as usize];
+                for k in 0..3 {
+                    bx[0][k] = bx[0][k].min(fb[0][k]);
+                    bx[1][k] = bx[1][k].max(fb[1][k]);
                 }
             }
             moments.push(m);
@@ -1067,20 +1066,6 @@ impl Regions {
             })
             .collect()
     }
-}
-
-/// The union of two ascending lists of distinct faces, ascending.
-fn merge_ascending(a: impl Iterator<Item = u32>, b: &[u32]) -> Vec<u32> {
-    let mut out = Vec::with_capacity(b.len());
-    let mut b = b.iter().copied().peekable();
-    for x in a {
-        while let Some(y) = b.next_if(|&y| y < x) {
-            out.push(y);
-        }
-        out.push(x);
-    }
-    out.extend(b);
-    out
 }
 
 fn fit_or_flat(m: &Moments, rule: PlaneRule) -> (Plane, f64) {
