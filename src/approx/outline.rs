@@ -875,8 +875,9 @@ fn adjacent_pairs(topo: &Topology, labels: &[u32]) -> Vec<(u32, u32)> {
 /// [`Regions::update`], kept across the builds of one realisation. A region whose faces are
 /// exactly one region's faces of last time keeps that region's values: a split or a merge
 /// changes one or two regions' faces, and the renumbering after a merge moves none. The
-/// others are summed again in face order, as a scan of every region sums them — the same
-/// values, without reading every face's moments and box on every build.
+/// others are summed again from their own faces (each region keeps its list) in face order,
+/// as a scan of every region sums them — the same values, without a pass over every face on
+/// every build.
 #[derive(Clone, Default)]
 struct Regions {
     labels: Vec<u32>,
@@ -919,11 +920,11 @@ impl Regions {
             let m = self.moments.len();
             let (mut to, mut moved, mut left) = (vec![NONE; m], vec![NONE; n], vec![0; m]);
             let mut faces = Vec::new();
-            for (f, (&a, &b)) in self.labels.iter().zip(labels).enumerate() {
+            for (face, (&a, &b)) in self.labels.iter().zip(labels).enumerate() {
                 if a == b {
                     continue;
                 }
-                faces.push(f as u32);
+                faces.push(face as u32);
                 left[a as usize] += 1;
                 let t = &mut to[a as usize];
                 *t = if *t == NONE || *t == b { b } else { MANY };
