@@ -1205,10 +1205,10 @@ pub(super) fn parts(
     parts
 }
 
-/// Region `r` given away to the regions around it, face by face: each face goes to the
-/// region across one of its edges whose plane it is nearest (integrated squared distance),
-/// nearest first (region growing into `r` with the neighbours' planes as proxies, as VSA
-/// grows its regions). The labels with the regions after `r` renumbered down by one, and
+/// Region `r` of the partition `fits` holds given away to the regions around it, face by
+/// face: each face goes to the region across one of its edges whose plane it is nearest
+/// (integrated squared distance), nearest first (region growing into `r` with the
+/// neighbours' planes as proxies, as VSA grows its regions). The labels with the regions after `r` renumbered down by one, and
 /// how much the residual grows; `None` when `r` has no neighbour.
 ///
 /// Why: a merge keeps the union of two regions, and when the defect it answers comes back
@@ -1219,21 +1219,21 @@ fn dissolve(
     topo: &Topology,
     face_moments: &[Moments],
     fits: &Regions,
-    labels: &[u32],
     r: u32,
 ) -> Option<(Vec<u32>, f64)> {
+    let labels = &fits.labels;
     let cost = |f: usize, q: u32| Some(face_moments[f].sq_distance(&fits.fit[q as usize].0));
-    let members: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == r).collect();
+    let members: Vec<usize> = fits.members[r as usize]
+        .iter()
+        .map(|&f| f as usize)
+        .collect();
     let given = hand_out(topo, labels, r, &members, cost)?;
     let mut out = labels.to_vec();
+    // What each neighbour gains, summed in face order (`given` follows the ascending members).
+    let mut gained = vec![Moments::default(); fits.moments.len()];
     for &(f, q) in &given {
         out[f] = q;
-    }
-    let mut gained = vec![Moments::default(); fits.moments.len()];
-    for (f, (&l, &o)) in labels.iter().zip(&out).enumerate() {
-        if l == r {
-            gained[o as usize] = gained[o as usize].add(&face_moments[f]);
-        }
+        gained[q as usize] = gained[q as usize].add(&face_moments[f]);
     }
     let mut grow = -fits.fit[r as usize].1;
     for (q, g) in gained.iter().enumerate().filter(|(_, g)| g.area > 0.0) {
@@ -1663,7 +1663,7 @@ fn search(
         // takes one of them out of the junction.)
         let given = match &defect {
             Defect::Outline { region, .. } if give_away => {
-                dissolve(topo, face_moments, fits, &st.labels, *region).map(|d| (*region, d))
+                dissolve(topo, face_moments, fits, *region).map(|d| (*region, d))
             }
             _ => None,
         };
@@ -2006,6 +2006,10 @@ mod tests {
                 }
                 let kept = &*regions;
                 for r in 0..n {
+                    let faces: Vec<u32> = (0..labels.len() as u32)
+                        .filter(|&f| labels[f as usize] == r as u32)
+                        .collect();
+                    assert_eq!(kept.members[r], faces, "region {r}'s faces");
                     assert_eq!(kept.moments[r], fresh[r], "region {r}");
                     let fit = fit_or_flat(&fresh[r], s.rule);
                     assert_eq!(kept.fit[r].1.to_bits(), fit.1.to_bits());
@@ -2239,7 +2243,7 @@ mod tests {
             let fits = Regions::of(s, &labels, 7);
             let band = fits.fit[6].1;
             assert!(band > 1e-4, "{band}");
-            let (out, grow) = dissolve(s.topo, &s.moments, &fits, &labels, 6).unwrap();
+            let (out, grow) = dissolve(s.topo, &s.moments, &fits, 6).unwrap();
             assert_eq!(out, sides);
             assert!((grow + band).abs() < 1e-9 * band, "{grow} {band}");
         });
