@@ -311,21 +311,19 @@ fn merged_cone(sa: V3, ca: f64, sb: V3, cb: f64) -> f64 {
 
 /// Sorted distinct regions around each vertex.
 pub fn vertex_clusters(topo: &Topology, face_cluster: &[u32]) -> Vec<Vec<u32>> {
+    let at = |v: u32| {
+        topo.vertex_faces(v)
+            .iter()
+            .map(|&f| face_cluster[f as usize])
+    };
     (0..topo.n_vertices as u32)
-        .map(|v| regions_at(topo, face_cluster, v))
+        .map(|v| {
+            let mut c: Vec<u32> = at(v).collect();
+            c.sort_unstable();
+            c.dedup();
+            c
+        })
         .collect()
-}
-
-/// Sorted distinct regions around vertex `v`.
-pub fn regions_at(topo: &Topology, face_cluster: &[u32], v: u32) -> Vec<u32> {
-    let mut c: Vec<u32> = topo
-        .vertex_faces(v)
-        .iter()
-        .map(|&f| face_cluster[f as usize])
-        .collect();
-    c.sort_unstable();
-    c.dedup();
-    c
 }
 
 /// Reassigns faces whose three vertices all lie in another region too (a one-face spike into
@@ -338,10 +336,9 @@ pub fn fix_collapsing_faces(
     faces: &[[u32; 3]],
     face_cluster: &mut [u32],
 ) -> usize {
-    let mut moved = 0;
-    for _ in 0..8 {
+    until_settled(8, || {
         let vc = vertex_clusters(topo, face_cluster);
-        let mut changed = false;
+        let mut moved = 0;
         for (f, face) in faces.iter().enumerate() {
             let own = face_cluster[f];
             let common = vc[face[0] as usize].iter().copied().find(|&c| {
@@ -355,15 +352,24 @@ pub fn fix_collapsing_faces(
                 if touches {
                     face_cluster[f] = c;
                     moved += 1;
-                    changed = true;
                 }
             }
         }
-        if !changed {
-            break;
+        moved
+    })
+}
+
+/// Runs `pass` (which returns how many changes it made) until a pass makes none, at most
+/// `max_passes` times; the changes made.
+fn until_settled(max_passes: usize, mut pass: impl FnMut() -> usize) -> usize {
+    let mut changes = 0;
+    for _ in 0..max_passes {
+        match pass() {
+            0 => break,
+            c => changes += c,
         }
     }
-    moved
+    changes
 }
 
 /// Merges each listed region into the adjacent region with the closest mean normal (`sums`
@@ -443,8 +449,7 @@ pub fn merge_unreachable_corners(
     max_passes: usize,
     rule: PlaneRule,
 ) -> usize {
-    let mut merges = 0;
-    for _ in 0..max_passes {
+    until_settled(max_passes, || {
         let sums = region_normal_sums(face_cluster, normals, areas);
         let n = sums.len();
         let mean: Vec<V3> = sums
@@ -463,7 +468,7 @@ pub fn merge_unreachable_corners(
             .collect();
         let mut target: Vec<u32> = (0..n as u32).collect();
         let mut touched = vec![false; n];
-        let mut any = false;
+        let mut merges = 0;
         for (v, cs) in vc.iter().enumerate() {
             if cs.len() < 3 || cs.iter().any(|&c| touched[c as usize]) {
                 continue;
@@ -498,18 +503,14 @@ pub fn merge_unreachable_corners(
                 for &c in cs {
                     touched[c as usize] = true;
                 }
-                any = true;
                 merges += 1;
             }
-        }
-        if !any {
-            break;
         }
         for l in face_cluster.iter_mut() {
             *l = target[*l as usize];
         }
-    }
-    merges
+        merges
+    })
 }
 
 /// Each region's neighbours (regions across an edge) and whether it touches the mesh's
@@ -542,8 +543,7 @@ pub fn merge_collapsing_regions(
     normals: &[V3],
     areas: &[f64],
 ) -> usize {
-    let mut merges = 0;
-    for _ in 0..64 {
+    until_settled(64, || {
         let sums = region_normal_sums(face_cluster, normals, areas);
         let n = sums.len();
         let (adj, open) = region_adjacency(topo, face_cluster, n);
@@ -551,13 +551,9 @@ pub fn merge_collapsing_regions(
             .filter(|&c| !open[c] && !adj[c].is_empty() && adj[c].len() < 3)
             .map(|c| c as u32)
             .collect();
-        if bad.is_empty() {
-            break;
-        }
-        merges += bad.len();
         merge_regions(face_cluster, &bad, &sums, &adj);
-    }
-    merges
+        bad.len()
+    })
 }
 
 /// Majority filter on region boundaries: a face with two of its three edge-neighbours in one
@@ -565,9 +561,8 @@ pub fn merge_collapsing_regions(
 /// boundaries; every spike face has all three corners on region boundaries, i.e. on plane–plane
 /// lines, and folds or collapses once the regions are made planar. Returns faces moved.
 pub fn smooth_boundaries(topo: &Topology, face_cluster: &mut [u32], max_passes: usize) -> usize {
-    let mut moved = 0;
-    for _ in 0..max_passes {
-        let mut changed = false;
+    until_settled(max_passes, || {
+        let mut moved = 0;
         for f in 0..face_cluster.len() {
             let own = face_cluster[f];
             let nb: Vec<u32> = super::lloyd::neighbors(topo, f)
@@ -580,14 +575,10 @@ pub fn smooth_boundaries(topo: &Topology, face_cluster: &mut [u32], max_passes: 
             if let Some(c) = other {
                 face_cluster[f] = c;
                 moved += 1;
-                changed = true;
             }
         }
-        if !changed {
-            break;
-        }
-    }
-    moved
+        moved
+    })
 }
 
 #[cfg(test)]

@@ -115,14 +115,10 @@ pub struct ApproxOptions {
     pub vertices: VertexUpdateOptions,
     /// Rounds of L2,1 Lloyd relaxation of the grown regions (see [`lloyd`]); 0 = off.
     pub lloyd_rounds: usize,
-    /// Majority filter on region boundaries before the realisation (see `cluster::smooth_boundaries`).
-    pub smooth_boundaries: bool,
     /// Largest normal cone half-angle (degrees) a clustering merge may create when others are
     /// left (see `cluster::ClusterOptions::max_cone_deg`).
     pub max_cone_deg: f64,
-    /// Lower θ (×0.75) while region growing gives fewer than K regions.
-    pub adapt_angle: bool,
-    /// Smallest θ tried by the adaptation.
+    /// θ is lowered (×0.75) while region growing gives fewer than K regions, down to this.
     pub min_angle_deg: f64,
     /// Regions meeting at a vertex are merged while their planes' common point is farther than
     /// this × bbox diagonal from it (see `cluster::merge_unreachable_corners`).
@@ -168,8 +164,6 @@ impl ApproxOptions {
             vertices: VertexUpdateOptions::default(),
             corner_reach_rel: 0.04,
             corner_amplification: 8.0,
-            adapt_angle: true,
-            smooth_boundaries: true,
             lloyd_rounds: 30,
             max_cone_deg: 45.0,
             min_angle_deg: 3.0,
@@ -294,14 +288,12 @@ pub struct ApproxReport {
 /// Result of [`approximate`].
 #[derive(Clone, Debug)]
 pub struct ApproxOutput {
-    /// Output vertices (OUT.obj).
-    pub positions: Vec<V3>,
-    /// Output triangles (OUT.obj).
-    pub faces: Vec<[u32; 3]>,
+    /// The polygons and their triangles (OUT.obj: [`polygons::PolygonMesh::to_obj`]).
+    pub polygons: polygons::PolygonMesh,
+    /// The region of each input face.
     pub face_cluster: Vec<u32>,
     /// The plane of each region (`face_cluster`'s labels index it).
     pub planes: Vec<Plane>,
-    pub polygons: polygons::PolygonMesh,
     pub report: ApproxReport,
 }
 
@@ -312,15 +304,10 @@ impl ApproxOutput {
     pub fn check_fold_free(&self) -> Result<(), ApproxError> {
         let r = &self.report;
         let finite = |p: &V3| p.iter().all(|c| c.is_finite());
-        if let Some(v) = self.positions.iter().position(|p| !finite(p)) {
+        if let Some(v) = self.polygons.positions.iter().position(|p| !finite(p)) {
             return Err(ApproxError::BadOutput(format!(
                 "output vertex {v} is not finite; nothing was written"
             )));
-        }
-        if !self.polygons.positions.iter().all(finite) {
-            return Err(ApproxError::BadOutput(
-                "a polygon corner is not finite; nothing was written".into(),
-            ));
         }
         if r.flipped_faces + r.degenerate_faces == 0 {
             return Ok(());
@@ -353,11 +340,7 @@ pub fn approximate(
     // Work at unit scale (exactly: a power of two), report and return in the file's units.
     let (scale, normalized) = crate::mesh::Scale::normalized(mesh);
     let mut best = best_run(&normalized, topo, opts, progress)?;
-    for p in best
-        .positions
-        .iter_mut()
-        .chain(best.polygons.positions.iter_mut())
-    {
+    for p in best.polygons.positions.iter_mut() {
         *p = scale.invert(*p);
     }
     for pl in best.planes.iter_mut() {
@@ -823,18 +806,14 @@ fn partition(
                 max_cone_deg: opts.max_cone_deg,
             },
         );
-        if cl.grown >= opts.k || angle < opts.min_angle_deg || !opts.adapt_angle {
+        if cl.grown >= opts.k || angle < opts.min_angle_deg {
             break cl;
         }
         angle *= 0.75;
     };
     let mut labels = cl.face_cluster.clone();
     let lloyd_rounds = lloyd::relax(topo, &sm.normals, a1, &mut labels, opts.lloyd_rounds);
-    let boundary_moves = if opts.smooth_boundaries {
-        cluster::smooth_boundaries(topo, &mut labels, 16)
-    } else {
-        0
-    };
+    let boundary_moves = cluster::smooth_boundaries(topo, &mut labels, 16);
     let corner_merges = cluster::merge_unreachable_corners(
         topo,
         &mesh.faces,
@@ -976,7 +955,7 @@ fn refit(
             .map(|((a, b), &t)| geom::blend_planes(a, b, t))
             .collect();
         match build_checked(surface, &r.labels, &planes, r.closes_handles, diag) {
-            Ok((polygons, triangles, triangle_region)) => {
+            Ok(polygons) => {
                 let error = |p: &[Plane]| input_distances(pos, regions_at, p).0;
                 let (before, after) = (error(&r.planes), error(&planes));
                 if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
@@ -990,8 +969,6 @@ fn refit(
                 }
                 if after < before {
                     r.polygons = polygons;
-                    r.triangles = triangles;
-                    r.triangle_region = triangle_region;
                     r.planes = planes;
                 }
                 return;
@@ -1024,14 +1001,14 @@ fn build_checked(
     planes: &[Plane],
     close_handles: bool,
     diag: f64,
-) -> Result<outline::Built, Vec<u32>> {
-    let (polygons, triangles, region) =
+) -> Result<polygons::PolygonMesh, Vec<u32>> {
+    let polygons =
         outline::build(surface, labels, planes, close_handles).map_err(|d| d.regions())?;
-    let bad = bad_triangles(&polygons.positions, &triangles, &region, planes, diag);
+    let bad = bad_triangles(&polygons, planes, diag);
     if bad.is_empty() {
-        Ok((polygons, triangles, region))
+        Ok(polygons)
     } else {
-        Err(bad.iter().map(|b| region[b.0]).collect())
+        Err(bad.iter().map(|b| polygons.triangle_region[b.0]).collect())
     }
 }
 
@@ -1071,15 +1048,9 @@ enum Bad {
 
 /// The output triangles that are flipped or degenerate (index, what), counted from the
 /// positions alone — not from what the construction believes it made.
-fn bad_triangles(
-    positions: &[V3],
-    triangles: &[[u32; 3]],
-    triangle_region: &[u32],
-    planes: &[Plane],
-    diag: f64,
-) -> Vec<(usize, Bad)> {
-    let (normals, areas) = face_normals_areas(positions, triangles);
-    triangle_region
+fn bad_triangles(mesh: &polygons::PolygonMesh, planes: &[Plane], diag: f64) -> Vec<(usize, Bad)> {
+    let (normals, areas) = face_normals_areas(&mesh.positions, &mesh.triangles);
+    mesh.triangle_region
         .iter()
         .enumerate()
         .filter_map(|(f, &reg)| {
@@ -1092,12 +1063,6 @@ fn bad_triangles(
             }
         })
         .collect()
-}
-
-/// [`bad_triangles`] of a realised partition's output, on its own planes.
-fn realised_bad(r: &outline::Realised, diag: f64) -> Vec<(usize, Bad)> {
-    let p = &r.polygons.positions;
-    bad_triangles(p, &r.triangles, &r.triangle_region, &r.planes, diag)
 }
 
 /// The headline error: the mean over input vertices of their distance to their regions'
@@ -1129,8 +1094,6 @@ impl From<Run> for ApproxOutput {
     fn from(run: Run) -> ApproxOutput {
         let r = run.realised;
         ApproxOutput {
-            positions: r.polygons.positions.clone(),
-            faces: r.triangles,
             face_cluster: r.labels,
             planes: r.planes,
             polygons: r.polygons,
@@ -1204,7 +1167,7 @@ fn finish(
         }
     }
     // The independent count of what the construction rules out.
-    let bad = realised_bad(&r, diag);
+    let bad = bad_triangles(&r.polygons, &r.planes, diag);
     let flipped = bad.iter().filter(|b| b.1 == Bad::Flipped).count();
     let degenerate = bad.len() - flipped;
     let mut notes = Vec::new();
@@ -1322,19 +1285,6 @@ fn renumber(labels: &mut [u32]) -> usize {
         *l = *map.entry(*l).or_insert(next);
     }
     map.len()
-}
-
-/// OBJ text of a triangle mesh (OUT.obj: the polygons' triangles).
-pub fn mesh_obj(positions: &[V3], faces: &[[u32; 3]]) -> String {
-    use std::fmt::Write;
-    let mut s = String::from("# foldfree approx: the triangles of the planar polygons\n");
-    for p in positions {
-        let _ = writeln!(s, "v {:.17e} {:.17e} {:.17e}", p[0], p[1], p[2]);
-    }
-    for f in faces {
-        let _ = writeln!(s, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1);
-    }
-    s
 }
 
 /// Meshes the unit tests of the stages share.

@@ -10,7 +10,8 @@
 use sprs::{CsMat, TriMat};
 
 use super::geom::{dot, mean_edge_length, normalize, V3};
-use super::sparse::{solve_factored, spmv, SpdSolver};
+use super::sparse::{solve_factored, SpdSolver};
+use crate::linalg::sparse::CsrOps;
 use crate::linalg::SolveError;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -140,7 +141,8 @@ pub fn smooth_normals(
             let b: Vec<Vec<f64>> = (0..3)
                 .map(|k| {
                     let q: Vec<f64> = (0..ne).map(|r| beta * p[r][k] - lam[r][k]).collect();
-                    let dq = spmv(&dt, &q);
+                    let mut dq = vec![0.0; nf];
+                    dt.spmv(&q, &mut dq);
                     rhs0[k].iter().zip(dq.iter()).map(|(a, b)| a + b).collect()
                 })
                 .collect();

@@ -246,7 +246,7 @@ impl Defect {
 /// The faces around vertex `v` in counter-clockwise order (seen from the side the faces
 /// face), and whether `v` is on the border (then the order runs from border to border).
 fn star(topo: &Topology, faces: &[[u32; 3]], v: u32) -> (Vec<u32>, bool) {
-    let around = faces_at(topo, v);
+    let around = topo.vertex_faces(v);
     let Some(&f0) = around.first() else {
         return (Vec::new(), false);
     };
@@ -282,10 +282,6 @@ fn star(topo: &Topology, faces: &[[u32; 3]], v: u32) -> (Vec<u32>, bool) {
         f = g;
     }
     (out, border)
-}
-
-fn faces_at(topo: &Topology, v: u32) -> &[u32] {
-    &topo.vf_faces[topo.vf_offsets[v as usize] as usize..topo.vf_offsets[v as usize + 1] as usize]
 }
 
 /// A corner of the polygon mesh: three regions' planes (the first [`OUTSIDE`] on the border:
@@ -635,7 +631,7 @@ fn region_outlines(
             for (i, &v) in lp.iter().enumerate() {
                 let b = lp[(i + 1) % lp.len()];
                 nb.extend(
-                    faces_at(topo, v)
+                    topo.vertex_faces(v)
                         .iter()
                         .filter(|&&f| faces[f as usize].contains(&b) && labels[f as usize] != r)
                         .map(|&f| labels[f as usize]),
@@ -762,9 +758,6 @@ fn region_polygon(
     Ok((poly, tris))
 }
 
-/// A polygon mesh, its triangles and the region of each triangle.
-pub(crate) type Built = (PolygonMesh, Vec<[u32; 3]>, Vec<u32>);
-
 /// The polygon mesh of a partition with its planes, and its triangles (in the polygons'
 /// planes); corners index into one shared list.
 pub fn build(
@@ -772,19 +765,20 @@ pub fn build(
     labels: &[u32],
     planes: &[Plane],
     close_handles: bool,
-) -> Result<Built, Defect> {
-    let mut regions = Regions {
-        close_handles,
-        ..Default::default()
-    };
-    regions.update(s, labels, planes.len());
+) -> Result<PolygonMesh, Defect> {
+    let mut regions = Regions::of(s, labels, planes.len());
+    regions.close_handles = close_handles;
     build_sized(s, planes, &mut regions)
 }
 
 /// [`build`] of the labels of `regions`' last update, with their bounding-box diagonals (how
 /// far a corner may lie from its vertex) and boundary loops (traced here for the regions whose
 /// faces changed since, kept for the next build).
-fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Result<Built, Defect> {
+fn build_sized(
+    s: &Surface<'_>,
+    planes: &[Plane],
+    regions: &mut Regions,
+) -> Result<PolygonMesh, Defect> {
     let (topo, faces) = (s.topo, s.faces);
     let size = regions.sizes();
     // Corners closer than the tolerance are one point at the output's precision: at one
@@ -804,8 +798,6 @@ fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Resu
         positions: cs.positions.clone(),
         ..Default::default()
     };
-    let mut tris: Vec<[u32; 3]> = Vec::new();
-    let mut tri_region: Vec<u32> = Vec::new();
     // Each region's loops, made when first asked for: by its own polygon, or by a neighbour's
     // handle (most builds end at a defect before the last region).
     let made: Vec<std::cell::OnceCell<Loops>> = vec![Default::default(); regions.loops.len()];
@@ -819,26 +811,23 @@ fn build_sized(s: &Surface<'_>, planes: &[Plane], regions: &mut Regions) -> Resu
         let outlines = kept_outlines(&all, r, regions.close_handles)?;
         let (poly, t) = region_polygon(&cs, &planes[r as usize], r, &outlines)?;
         mesh.holes += outlines.len() - 1;
-        tri_region.extend(std::iter::repeat_n(r, t.len()));
-        tris.extend(t);
+        mesh.triangle_region.extend(std::iter::repeat_n(r, t.len()));
+        mesh.triangles.extend(t);
         mesh.polygons.push(poly);
         mesh.region.push(r);
     }
-    if let Some([a, b]) = first_crossing(&mesh.positions, &tris, &tri_region, s.tol) {
+    let m = &mesh;
+    if let Some([a, b]) = first_crossing(&m.positions, &m.triangles, &m.triangle_region, s.tol) {
         return Err(Defect::Crossing { regions: [a, b] });
     }
     mesh.corners = cs.vertex;
-    Ok((mesh, tris, tri_region))
+    Ok(mesh)
 }
 
 /// A partition realised as a polygon mesh.
 #[derive(Clone)]
 pub struct Realised {
     pub polygons: PolygonMesh,
-    /// The polygons' triangles (indices into `polygons.positions`), in their planes, and the
-    /// region of each.
-    pub triangles: Vec<[u32; 3]>,
-    pub triangle_region: Vec<u32>,
     /// Region of each face, numbered `0..planes.len()`.
     pub labels: Vec<u32>,
     pub planes: Vec<Plane>,
@@ -1222,7 +1211,7 @@ fn dissolve(
     r: u32,
 ) -> Option<(Vec<u32>, f64)> {
     let labels = &fits.labels;
-    let cost = |f: usize, q: u32| Some(face_moments[f].sq_distance(&fits.fit[q as usize].0));
+    let cost = |f: usize, q: u32| face_moments[f].sq_distance(&fits.fit[q as usize].0);
     let members: Vec<usize> = fits.members[r as usize]
         .iter()
         .map(|&f| f as usize)
@@ -1249,14 +1238,14 @@ fn dissolve(
 
 /// Region growing of region `r`'s faces (`members`) into its neighbours: each face goes to
 /// the region across one of its edges (a neighbour, or a face already handed out) for which
-/// `cost(face, region)` is least, cheapest first (`None`: that region takes no faces). New
-/// labels of `members`, or `None` when some face cannot be reached.
+/// `cost(face, region)` is least, cheapest first. New labels of `members`, or `None` when
+/// some face cannot be reached.
 fn hand_out(
     topo: &Topology,
     fc: &[u32],
     r: u32,
     members: &[usize],
-    cost: impl Fn(usize, u32) -> Option<f64>,
+    cost: impl Fn(usize, u32) -> f64,
 ) -> Option<Vec<(usize, u32)>> {
     let mut label: HashMap<usize, u32> = HashMap::new();
     let mut heap: BinaryHeap<Reverse<(u64, usize, u32)>> = BinaryHeap::new();
@@ -1266,10 +1255,8 @@ fn hand_out(
                 continue;
             }
             let c = if fc[f] == r { label[&f] } else { fc[f] };
-            if let Some(k) = cost(g, c) {
-                // Non-negative floats order as their bits do.
-                heap.push(Reverse((k.max(0.0).to_bits(), g, c)));
-            }
+            // Non-negative floats order as their bits do.
+            heap.push(Reverse((cost(g, c).max(0.0).to_bits(), g, c)));
         }
     };
     for &f in members {
@@ -1554,7 +1541,7 @@ fn search(
     let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
     let mut resume = None;
     let stopped = || stop.load(Ordering::Relaxed);
-    let (mut polygons, mut triangles, mut triangle_region) = loop {
+    let mut polygons = loop {
         if stopped() {
             return Err((Defect::Stopped, None));
         }
@@ -1687,65 +1674,49 @@ fn search(
         st.merges += 1;
         st.defects.push(defect);
     };
-    let Search {
-        mut labels,
-        mut n,
-        defects,
-        mut splits,
-        merges,
-        unpinched,
-        dissolved,
-        mut unsplittable,
-        mut regions,
-        ..
-    } = st;
     // The budget left: first where it removes curvature (a split that keeps at most a
     // quarter of the region's residual), then the boundaries the merges removed, then wherever
     // it lowers the residual at all.
-    let before = n;
+    let before = st.n;
     let normals = s.normals_metric();
-    let spend =
-        |regions: &mut Regions, labels: &mut Vec<u32>, n: &mut usize, unsplittable, keep| {
-            spend_budget(s, regions, labels, n, k, unsplittable, keep, &normals, stop)
-        };
-    if let Some(b) = spend(&mut regions, &mut labels, &mut n, &mut unsplittable, 0.25) {
-        (polygons, triangles, triangle_region) = b;
-    }
+    let spend = |st: &mut Search, keep| spend_budget(s, st, k, keep, &normals, stop);
+    polygons = spend(&mut st, 0.25).unwrap_or(polygons);
     // Then the boundaries of the given partition that the realisation merged away, where
     // they are realisable now.
     let mut tried = HashSet::new();
-    while n < k && !stopped() {
-        let built = resplit(s, &mut regions, start_labels, &mut labels, n, &mut tried);
+    while st.n < k && !stopped() {
+        let built = resplit(
+            s,
+            &mut st.regions,
+            start_labels,
+            &mut st.labels,
+            st.n,
+            &mut tried,
+        );
         let Some(built) = built else { break };
-        (polygons, triangles, triangle_region) = built;
-        n += 1;
+        polygons = built;
+        st.n += 1;
     }
     // Regions left alone at a quarter are tried again at any gain.
-    let mut unsplittable = vec![false; n];
-    if let Some(b) = spend(&mut regions, &mut labels, &mut n, &mut unsplittable, 1.0) {
-        (polygons, triangles, triangle_region) = b;
-    }
+    st.unsplittable = vec![false; st.n];
+    polygons = spend(&mut st, 1.0).unwrap_or(polygons);
     // Stopped while spending the budget: the phases ended early, the result is not this
     // partition's realisation.
     if stopped() {
         return Err((Defect::Stopped, None));
     }
-    splits += n - before;
-    regions.update(s, &labels, n);
-    let planes = regions.planes();
+    st.regions.update(s, &st.labels, st.n);
     Ok(Realised {
         polygons,
-        triangles,
-        triangle_region,
-        labels,
-        planes,
-        defects,
-        splits,
-        merges,
-        unpinched,
-        dissolved,
+        planes: st.regions.planes(),
+        labels: st.labels,
+        defects: st.defects,
+        splits: st.splits + st.n - before,
+        merges: st.merges,
+        unpinched: st.unpinched,
+        dissolved: st.dissolved,
         plane_halvings: 0,
-        closes_handles: regions.close_handles,
+        closes_handles: st.regions.close_handles,
     })
 }
 
@@ -1763,37 +1734,30 @@ fn search(
 /// A region whose halving across its main direction cannot be realised is halved across the
 /// second one too (why: [`super::lloyd::Planes`]'s `AXES`).
 pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize {
-    let (before, mut n) = (r.planes.len(), r.planes.len());
-    let mut unsplittable = vec![false; n];
-    let mut regions = Regions {
-        close_handles: r.closes_handles,
+    let before = r.planes.len();
+    let mut st = Search {
+        labels: std::mem::take(&mut r.labels),
+        n: before,
+        unsplittable: vec![false; before],
         ..Default::default()
     };
+    st.regions.close_handles = r.closes_handles;
     let planes = super::lloyd::Planes {
         moments: &s.moments,
         rule: s.rule,
     };
-    if let Some(b) = spend_budget(
-        s,
-        &mut regions,
-        &mut r.labels,
-        &mut n,
-        k,
-        &mut unsplittable,
-        1.0,
-        &planes,
-        &AtomicBool::new(false),
-    ) {
-        (r.polygons, r.triangles, r.triangle_region) = b;
-        r.planes = fit_planes(s, &r.labels, n);
+    if let Some(b) = spend_budget(s, &mut st, k, 1.0, &planes, &AtomicBool::new(false)) {
+        r.polygons = b;
+        r.planes = fit_planes(s, &st.labels, st.n);
     }
-    let added = n - before;
+    r.labels = st.labels;
+    let added = st.n - before;
     r.splits += added;
     r.plane_halvings += added;
     added
 }
 
-/// Spends the budget left (`n` of `k` regions used) on the worst-fitting region while its
+/// Spends the budget left (`st.n` of `k` regions used) on the worst-fitting region while its
 /// halving under `metric` ([`super::lloyd::halve`], its [`super::lloyd::Metric::AXES`]
 /// directions tried in turn) keeps at most `keep` of its residual and the partition stays
 /// realisable; a region whose split fails either way is not tried again (`unsplittable`). The
@@ -1805,18 +1769,21 @@ pub fn spend_on_two_planes(s: &Surface<'_>, r: &mut Realised, k: usize) -> usize
 /// sides, BENCHMARKS round 10). With `keep` = 1/4 the budget goes to curvature first; with 1
 /// what is left goes wherever it lowers the error — which is what the error at K planes asks
 /// for, once curvature and the boundaries the merges removed have had theirs.
-#[allow(clippy::too_many_arguments)]
 fn spend_budget<M: super::lloyd::Metric>(
     s: &Surface<'_>,
-    regions: &mut Regions,
-    labels: &mut Vec<u32>,
-    n: &mut usize,
+    st: &mut Search,
     k: usize,
-    unsplittable: &mut Vec<bool>,
     keep: f64,
     metric: &M,
     stop: &AtomicBool,
-) -> Option<Built> {
+) -> Option<PolygonMesh> {
+    let Search {
+        labels,
+        n,
+        unsplittable,
+        regions,
+        ..
+    } = st;
     let mut last = None;
     regions.update(s, labels, *n);
     let mut fit = regions.fit.clone();
@@ -1875,7 +1842,7 @@ fn resplit(
     labels: &mut [u32],
     n: usize,
     tried: &mut HashSet<u64>,
-) -> Option<Built> {
+) -> Option<PolygonMesh> {
     let face_moments = &s.moments[..];
     regions.update(s, labels, n);
     let fits = &*regions;
@@ -2153,7 +2120,7 @@ mod tests {
     #[test]
     fn euler_characteristic_counts_a_bridged_hole_as_a_hole() {
         on_cube(|s, sides| {
-            let (poly, _, _) = build(s, sides, &fit_planes(s, sides, 6), false).unwrap();
+            let poly = build(s, sides, &fit_planes(s, sides, 6), false).unwrap();
             assert_eq!(poly.euler_characteristic(), 2);
         });
         let square = |r: f64| [[-r, -r], [r, -r], [r, r], [-r, r]];
@@ -2169,6 +2136,7 @@ mod tests {
             region: vec![0],
             holes: 1,
             corners: vec![0; 8],
+            ..Default::default()
         };
         assert_eq!(mesh.euler_characteristic(), 0);
     }
@@ -2189,7 +2157,7 @@ mod tests {
                 })
                 .collect();
             let mut tried = HashSet::new();
-            let (poly, _, _) = resplit(
+            let poly = resplit(
                 s,
                 &mut Regions::default(),
                 sides,

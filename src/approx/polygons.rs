@@ -5,9 +5,10 @@
 //! or nothing; chained head to tail they form loops (`region_loops`), counter-clockwise (seen
 //! along the plane normal) for the outer loop and clockwise for holes, because the faces are.
 //! OBJ faces cannot have holes, so a hole is joined to the outer loop by a bridge (a keyhole
-//! polygon, [`bridge_holes`]); `--triangulate` ear-clips it ([`ear_clip`]).
+//! polygon, [`bridge_holes`]), and each polygon is ear-clipped into triangles in its plane
+//! ([`ear_clip`]).
 
-use super::geom::{cross, dot, normalize, V3};
+use super::geom::{cross, normalize, V3};
 use crate::mesh::{Topology, NO_FACE};
 
 /// Polygons over a shared list of corner vertices.
@@ -22,6 +23,10 @@ pub struct PolygonMesh {
     pub region: Vec<u32>,
     /// Holes bridged.
     pub holes: usize,
+    /// The polygons' triangles (ear clipping in each region's plane; indices into
+    /// `positions`) and the region of each: OUT.obj, the triangles every output check counts.
+    pub triangles: Vec<[u32; 3]>,
+    pub triangle_region: Vec<u32>,
 }
 
 impl PolygonMesh {
@@ -46,6 +51,33 @@ impl PolygonMesh {
         used.sort_unstable();
         used.dedup();
         used.len() as i64 - edges.len() as i64 + self.polygons.len() as i64
+    }
+
+    /// OBJ text: `v` per corner, `f` per polygon, or per triangle (OUT.obj, the triangles
+    /// checked: `--triangulate` writes the same ones).
+    pub fn to_obj(&self, triangles: bool) -> String {
+        use std::fmt::Write;
+        let mut s = String::from(if triangles {
+            "# foldfree approx: the triangles of the planar polygons\n"
+        } else {
+            "# foldfree approx: planar polygons\n"
+        });
+        for p in &self.positions {
+            let _ = writeln!(s, "v {:.17e} {:.17e} {:.17e}", p[0], p[1], p[2]);
+        }
+        let faces: Vec<&[u32]> = if triangles {
+            self.triangles.iter().map(|t| &t[..]).collect()
+        } else {
+            self.polygons.iter().map(|p| &p[..]).collect()
+        };
+        for f in faces {
+            s.push('f');
+            for i in f {
+                let _ = write!(s, " {}", i + 1);
+            }
+            s.push('\n');
+        }
+        s
     }
 }
 
@@ -256,48 +288,4 @@ pub fn bridge_holes(
         poly = merged;
     }
     poly
-}
-
-impl PolygonMesh {
-    /// Triangles of all polygons (ear clipping in each region's plane), indices into `positions`.
-    pub fn triangulate(&self) -> Vec<[u32; 3]> {
-        let mut tris = Vec::new();
-        for poly in &self.polygons {
-            let pts: Vec<V3> = poly.iter().map(|&i| self.positions[i as usize]).collect();
-            let m = pts.len();
-            let mut nrm = [0.0; 3];
-            for i in 0..m {
-                nrm = super::geom::add(nrm, cross(pts[i], pts[(i + 1) % m]));
-            }
-            let Some(nrm) = normalize(nrm) else { continue };
-            let (u, w) = basis(nrm);
-            let p2: Vec<[f64; 2]> = pts.iter().map(|&q| [dot(q, u), dot(q, w)]).collect();
-            for t in ear_clip(&p2) {
-                tris.push(t.map(|k| poly[k]));
-            }
-        }
-        tris
-    }
-
-    /// OBJ text: `v` per corner, `f` per polygon (or per triangle).
-    pub fn to_obj(&self, triangulate: bool) -> String {
-        use std::fmt::Write;
-        let mut s = String::from("# foldfree approx: planar polygons\n");
-        for p in &self.positions {
-            let _ = writeln!(s, "v {:.17e} {:.17e} {:.17e}", p[0], p[1], p[2]);
-        }
-        let faces: Vec<Vec<u32>> = if triangulate {
-            self.triangulate().into_iter().map(|t| t.to_vec()).collect()
-        } else {
-            self.polygons.clone()
-        };
-        for f in faces {
-            s.push('f');
-            for i in f {
-                let _ = write!(s, " {}", i + 1);
-            }
-            s.push('\n');
-        }
-        s
-    }
 }

@@ -1,5 +1,5 @@
-//! Sparse helpers of the approximation stages: CSR products and one CG entry point with the
-//! stages' tolerances.
+//! The sparse solves of the approximation stages: Cholesky with one CG entry point behind it,
+//! at the stages' tolerances.
 
 use sprs::CsMat;
 
@@ -9,15 +9,6 @@ use crate::linalg::{
     krylov::{CgOptions, KrylovSolver},
     precond::Preconditioner,
 };
-
-/// y = A x for CSR `a`.
-pub fn spmv(a: &CsMat<f64>, x: &[f64]) -> Vec<f64> {
-    let mut y = vec![0.0; a.rows()];
-    for (r, row) in a.outer_iterator().enumerate() {
-        y[r] = row.iter().map(|(c, v)| v * x[c]).sum();
-    }
-    y
-}
 
 /// Solves SPD systems A X = B of one sparsity pattern in sequence (a penalty that grows, a
 /// linearisation redone): by sparse Cholesky, the ordering and symbolic factorisation

@@ -20,7 +20,7 @@ pub struct ApproxArgs {
     /// Also write one planar polygon per region (holes bridged in) to this OBJ.
     #[arg(long, value_name = "POLY.obj")]
     polygons: Option<PathBuf>,
-    /// Write the polygons as triangles (ear clipping in each plane).
+    /// Write the polygons as triangles (those of the output, ear-clipped in each plane).
     #[arg(long)]
     triangulate: bool,
     /// Seed of the region-growing order.
@@ -94,10 +94,7 @@ pub fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     let r = &out.report;
     // The contract of the output: every face keeps its orientation and area.
     out.check_fold_free()?;
-    outputs.set(
-        &args.output,
-        approx::mesh_obj(&out.positions, &out.faces).into_bytes(),
-    );
+    outputs.set(&args.output, out.polygons.to_obj(true).into_bytes());
     if let Some(p) = &args.polygons {
         outputs.set(p, out.polygons.to_obj(args.triangulate).into_bytes());
     }
