@@ -277,8 +277,8 @@ pub fn relax_subset<M: Metric>(
 /// Splits region `c` in two: halved across the `axis`-th direction (0 = the main one, 1 = the
 /// next) of the weighted spread of its faces' [`Metric::key`]s — faces on the positive side
 /// (about the weighted mean) get label `new_label` — then the two halves relaxed against each
-/// other under `metric` (the rest of the partition is left as it is). False when the region
-/// has no spread along that direction or a half ends empty.
+/// other under `metric` for at most [`HALVING_ROUNDS`] (the rest of the partition is left as
+/// it is). False when the region has no spread along that direction or a half ends empty.
 ///
 /// With [`Normals`] (the realisation's split): a region that folds when flattened usually
 /// turns too much in one direction (a half-cylinder), and its two halves each turn half as
@@ -293,15 +293,18 @@ pub fn halve<M: Metric>(
     labels: &mut [u32],
     c: u32,
     new_label: u32,
-    rounds: usize,
     axis: usize,
 ) -> bool {
     let members: Vec<usize> = (0..labels.len()).filter(|&f| labels[f] == c).collect();
-    halve_members(topo, metric, labels, &members, c, new_label, rounds, axis)
+    halve_members(topo, metric, labels, &members, c, new_label, axis)
 }
 
+/// Lloyd rounds of a halving's two halves: the flood from a straight cut between two
+/// proxies settles within a few rounds (and a two-cycle ends at once, [`relax_subset`]); the
+/// cap bounds the cost of one that does not.
+pub const HALVING_ROUNDS: usize = 10;
+
 /// [`halve`] of region `c` whose faces, ascending, are `members` (a caller that has them).
-#[allow(clippy::too_many_arguments)]
 pub fn halve_members<M: Metric>(
     topo: &Topology,
     metric: &M,
@@ -309,7 +312,6 @@ pub fn halve_members<M: Metric>(
     members: &[usize],
     c: u32,
     new_label: u32,
-    rounds: usize,
     axis: usize,
 ) -> bool {
     let (key, area) = (|f| metric.key(f), |f| metric.weight(f));
@@ -355,13 +357,13 @@ pub fn halve_members<M: Metric>(
         }
         return false;
     }
-    relax_subset(topo, metric, labels, members, rounds);
+    relax_subset(topo, metric, labels, members, HALVING_ROUNDS);
     let kept = members.iter().filter(|&&f| labels[f] == c).count();
     kept > 0 && kept < members.len()
 }
 
 /// VSA's incremental insertion: while fewer than `k` regions, the region of largest error
-/// under `metric` is halved ([`halve`] across its main direction, `rounds` rounds) where
+/// under `metric` is halved ([`halve`] across its main direction) where
 /// `worth(labels, region, new)` says the halving adds something; a region that cannot be
 /// halved so is passed over. Returns the region count reached.
 ///
@@ -373,7 +375,6 @@ pub fn fill<M: Metric>(
     labels: &mut [u32],
     mut n: usize,
     k: usize,
-    rounds: usize,
     worth: impl Fn(&[u32], u32, u32) -> bool,
 ) -> usize {
     let all: Vec<usize> = (0..labels.len()).collect();
@@ -392,7 +393,7 @@ pub fn fill<M: Metric>(
             break;
         };
         let (c, new) = (worst as u32, n as u32);
-        if halve(topo, metric, labels, c, new, rounds, 0) && worth(labels, c, new) {
+        if halve(topo, metric, labels, c, new, 0) && worth(labels, c, new) {
             n += 1;
             stuck.push(false);
         } else {
@@ -490,7 +491,6 @@ mod tests {
             &mut labels,
             0,
             1,
-            10,
             0
         ));
         let ridge: Vec<bool> = (0..2 * n).map(|f| f >= n).collect();
@@ -519,7 +519,6 @@ mod tests {
             &mut labels,
             0,
             1,
-            10,
             0
         ));
         let rising = labels[0];
@@ -539,15 +538,9 @@ mod tests {
             areas: &areas,
         };
         let mut labels = vec![0u32; 2 * n];
-        assert_eq!(
-            fill(&topo, &metric, &mut labels, 1, 2, 10, |_, _, _| false),
-            1
-        );
+        assert_eq!(fill(&topo, &metric, &mut labels, 1, 2, |_, _, _| false), 1);
         assert!(labels.iter().all(|&l| l == 0));
-        assert_eq!(
-            fill(&topo, &metric, &mut labels, 1, 2, 10, |_, _, _| true),
-            2
-        );
+        assert_eq!(fill(&topo, &metric, &mut labels, 1, 2, |_, _, _| true), 2);
         for (f, &l) in labels.iter().enumerate() {
             assert_eq!(l == labels[0], f < n, "face {f}: {labels:?}");
         }
@@ -568,7 +561,7 @@ mod tests {
             normals: &normals,
             areas: &areas,
         };
-        assert!(!halve(&topo, &metric, &mut labels, 0, 1, 10, 0));
+        assert!(!halve(&topo, &metric, &mut labels, 0, 1, 0));
         assert!(labels.iter().all(|&l| l == 0));
     }
 }

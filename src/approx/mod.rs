@@ -871,7 +871,7 @@ fn filled(
     let mut labels = part.labels.clone();
     let worth = |labels: &[u32], c, new| surface.adds_a_plane(labels, c, new);
     let topo = surface.topo;
-    if lloyd::fill(topo, &metric, &mut labels, part.n, opts.k, 10, worth) == part.n {
+    if lloyd::fill(topo, &metric, &mut labels, part.n, opts.k, worth) == part.n {
         return None;
     }
     let mut facts = part.facts.clone();
@@ -958,15 +958,15 @@ fn refit(
             Ok(polygons) => {
                 let error = |p: &[Plane]| input_distances(pos, regions_at, p).0;
                 let (before, after) = (error(&r.planes), error(&planes));
-                if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
-                    eprintln!(
-                        "approx: refit: mean distance {:.4e} → {:.4e}·diag (the L1 plane: {:.4e}), {builds} builds, {} of {n} regions at their L1 plane",
+                trace(|| {
+                    format!(
+                        "refit: mean distance {:.4e} → {:.4e}·diag (the L1 plane: {:.4e}), {builds} builds, {} of {n} regions at their L1 plane",
                         before / diag,
                         after / diag,
                         error(&l1) / diag,
                         t.iter().filter(|&&x| x == 1.0).count()
-                    );
-                }
+                    )
+                });
                 if after < before {
                     r.polygons = polygons;
                     r.planes = planes;
@@ -1116,13 +1116,13 @@ fn realise(
     stop: &AtomicBool,
 ) -> Result<Run, ApproxError> {
     let t = Instant::now();
-    if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
-        eprintln!(
-            "approx: partition before realising: {} regions, mean distance {:.3e}·diag",
-            part.n,
-            part.error / geom::bbox_diagonal(mesh)
-        );
-    }
+    trace(|| {
+        let e = part.error / geom::bbox_diagonal(mesh);
+        format!(
+            "partition before realising: {} regions, mean distance {e:.3e}·diag",
+            part.n
+        )
+    });
     let (labels, k) = (part.labels.clone(), opts.k);
     let r = outline::realise(surface, labels, part.n, k, give_away, stop)
         .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
@@ -1275,6 +1275,15 @@ struct PartitionFacts {
     corner_merges: usize,
     crease_edges: usize,
     alm_rounds_normals: usize,
+}
+
+/// Prints what `what` says to stderr, after "approx: ", when `FOLDFREE_APPROX_TRACE` is set
+/// in the environment (what the stages met and decided, for a reader of one run; otherwise
+/// `what` is not called).
+pub(crate) fn trace(what: impl FnOnce() -> String) {
+    if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
+        eprintln!("approx: {}", what());
+    }
 }
 
 /// Renumbers region labels to 0..count in order of first appearance (drops emptied regions).

@@ -36,6 +36,7 @@ use super::intersect::first_crossing;
 use super::polygons::{
     area2, basis, bridge_holes, ear_clip, orient, region_loops, segments_cross, PolygonMesh,
 };
+use super::trace;
 use crate::linalg::small::sym_eigen;
 use crate::mesh::{Topology, NO_FACE};
 
@@ -1365,7 +1366,7 @@ impl<'a> Surface<'a> {
         }
     }
 
-    /// Splits region `r` of `labels` in two, the new half labelled `n` (Lloyd, 10 rounds;
+    /// Splits region `r` of `labels` in two, the new half labelled `n` (Lloyd;
     /// [`super::lloyd::halve`] under [`super::lloyd::Normals`]). False when it cannot be halved.
     ///
     /// The halves depend on the region's faces alone (every new label is above every old
@@ -1388,7 +1389,7 @@ impl<'a> Surface<'a> {
         }
         let metric = self.normals_metric();
         let halved =
-            super::lloyd::halve_members(self.topo, &metric, labels, &faces, r, n as u32, 10, 0);
+            super::lloyd::halve_members(self.topo, &metric, labels, &faces, r, n as u32, 0);
         let new: Vec<u32> = faces
             .iter()
             .filter(|&&f| labels[f] == n as u32)
@@ -1498,9 +1499,7 @@ pub fn realise(
     };
     match search(s, &labels, start, k, give_away, stop) {
         Err((d, Some(resume))) => {
-            if std::env::var_os("FOLDFREE_APPROX_TRACE").is_some() {
-                eprintln!("approx outline: resumed with handles closed (it ended at: {d})");
-            }
+            trace(|| format!("outline: resumed with handles closed (it ended at: {d})"));
             search(s, &labels, *resume, k, give_away, stop)
         }
         r => r,
@@ -1538,7 +1537,6 @@ fn search(
 ) -> Result<Realised, (Defect, Option<Box<Search>>)> {
     let (topo, faces) = (s.topo, s.faces);
     let face_moments = &s.moments[..];
-    let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
     let mut resume = None;
     let stopped = || stop.load(Ordering::Relaxed);
     let mut polygons = loop {
@@ -1550,9 +1548,7 @@ fn search(
             Ok(x) => break x,
             Err(d) => d,
         };
-        if trace {
-            eprintln!("approx outline: {} regions: {defect}", st.n);
-        }
+        trace(|| format!("outline: {} regions: {defect}", st.n));
         let (named, fits) = (defect.regions(), &st.regions);
         let fresh = st.seen.insert(hash_of(&st.labels));
         // The seen set rules out cycles of wedge moves; the count (one per vertex) bounds a
@@ -1660,9 +1656,7 @@ fn search(
                 st.labels = trial;
                 st.unsplittable.remove(r as usize);
                 st.dissolved += 1;
-                if trace {
-                    eprintln!("approx outline: region {r} given away");
-                }
+                trace(|| format!("outline: region {r} given away"));
             }
             (Some((keep, gone)), _) => {
                 merge(&mut st.labels, keep, gone);
@@ -1797,7 +1791,7 @@ fn spend_budget<M: super::lloyd::Metric>(
         let was = fit[worst].1;
         let tried = (0..M::AXES).find_map(|axis| {
             let (mut trial, c, new) = (labels.clone(), worst as u32, *n as u32);
-            if !super::lloyd::halve(s.topo, metric, &mut trial, c, new, 10, axis) {
+            if !super::lloyd::halve(s.topo, metric, &mut trial, c, new, axis) {
                 return None;
             }
             regions.update(s, &trial, *n + 1);

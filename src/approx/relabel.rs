@@ -13,7 +13,7 @@
 //! undone, and the whole is dropped after 8 builds or if a region ends in two pieces. Then
 //! the planes are refitted to the moved vertex sets (stage 5 again).
 
-use super::{build_checked, cluster, input_distances, outline, V3};
+use super::{build_checked, cluster, input_distances, outline, trace, V3};
 
 /// Moves faces on a region's border to the neighbouring region whose plane their vertices are
 /// nearer to, when that lowers the headline error over the realised planes, and builds the
@@ -111,7 +111,6 @@ pub(super) fn relabel(
             }
         }
     }
-    let trace = std::env::var_os("FOLDFREE_APPROX_TRACE").is_some();
     let old_at = cluster::vertex_clusters(topo, &r.labels);
     let before = input_distances(pos, &old_at, &r.planes).0;
     let mut builds = 0;
@@ -131,14 +130,12 @@ pub(super) fn relabel(
         }
         let named = match build_checked(surface, &labels, &r.planes, r.closes_handles, diag) {
             Ok(polygons) => {
-                if trace {
-                    eprintln!(
-                        "approx: relabel: {} faces, mean distance {:.4e} → {:.4e}·diag, {builds} builds",
-                        moves.len(),
-                        before / diag,
-                        after / diag
-                    );
-                }
+                let (b, a, m) = (before / diag, after / diag, moves.len());
+                trace(|| {
+                    format!(
+                        "relabel: {m} faces, mean distance {b:.4e} → {a:.4e}·diag, {builds} builds"
+                    )
+                });
                 r.polygons = polygons;
                 r.labels = labels;
                 return true;
@@ -154,9 +151,7 @@ pub(super) fn relabel(
             }
         });
     }
-    if trace {
-        eprintln!("approx: relabel: not kept ({builds} builds)");
-    }
+    trace(|| format!("relabel: not kept ({builds} builds)"));
     false
 }
 
