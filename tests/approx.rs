@@ -801,8 +801,7 @@ fn moments_fit_planes_and_measure_a_merge() {
 fn outline_splits_an_unrealisable_partition_into_the_cube_sides() {
     let m = noisy_cube(6, 0.01, 21);
     let t = topo(&m);
-    let (normals, areas) = face_normals_areas(&m.positions, &m.faces);
-    let s = Surface::new(&t, &m, &normals, &areas);
+    let s = Surface::new(&t, &m);
     let r = outline::realise(&s, vec![0; m.faces.len()], 1, 6, true, &Default::default()).unwrap();
     assert_eq!(r.planes.len(), 6);
     assert_eq!(r.merges, 0);
@@ -896,9 +895,8 @@ fn a_tunnel_without_planes_of_its_own_is_closed_by_the_polygons_around_it() {
     let m = square_frame();
     let t = topo(&m);
     assert_eq!(t.genus(), Some(1));
-    let (normals, areas) = face_normals_areas(&m.positions, &m.faces);
-    let s = Surface::new(&t, &m, &normals, &areas);
-    let labels: Vec<u32> = (m.faces.iter().zip(&normals))
+    let s = Surface::new(&t, &m);
+    let labels: Vec<u32> = (m.faces.iter().zip(&s.normals))
         .map(|(f, n)| {
             let c = f.iter().fold([0.0; 3], |c, &v| {
                 std::array::from_fn(|k| c[k] + m.positions[v as usize][k] / 3.0)

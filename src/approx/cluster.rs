@@ -12,7 +12,8 @@
 use std::cmp::Reverse;
 use std::collections::{BTreeSet, BinaryHeap};
 
-use super::geom::{add, dot, fit_plane, normalize, scale, Plane, PlaneRule, SplitMix, V3};
+use super::geom::{add, dot, fit_plane, normalize, scale, Plane, SplitMix, V3};
+use super::outline::Surface;
 use crate::mesh::{Topology, NO_FACE};
 
 /// Parameters of [`cluster_faces`].
@@ -331,11 +332,8 @@ pub fn vertex_clusters(topo: &Topology, face_cluster: &[u32]) -> Vec<Vec<u32>> {
 /// Written for the earlier design (faces pressed onto planes); measured in this one, the
 /// realisation does worse without it (BENCHMARKS, planar approximation round 28). Returns how
 /// many faces were moved (bounded passes).
-pub fn fix_collapsing_faces(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    face_cluster: &mut [u32],
-) -> usize {
+pub fn fix_collapsing_faces(s: &Surface<'_>, face_cluster: &mut [u32]) -> usize {
+    let (topo, faces) = (s.topo, s.faces);
     until_settled(8, || {
         let vc = vertex_clusters(topo, face_cluster);
         let mut moved = 0;
@@ -434,23 +432,17 @@ fn corner_reach(x: V3, planes: &[Plane]) -> Option<f64> {
 /// of a cylinder meeting in a T) the surface folds to reach it. Such corners cannot be
 /// realised, so the two edge-adjacent regions there with the closest normals are merged, until
 /// every corner's common point is within max(`max_reach`, `amplification` × the vertex's
-/// largest distance to those planes) of the vertex (planes fitted to the regions' vertices at
-/// `pos`, chosen by `rule`), or `max_passes`. Returns the number of merges.
-#[allow(clippy::too_many_arguments)]
+/// largest distance to those planes) of the vertex (planes fitted to the regions' vertices,
+/// chosen by the surface's rule), or 64 passes. Returns the number of merges.
 pub fn merge_unreachable_corners(
-    topo: &Topology,
-    faces: &[[u32; 3]],
-    pos: &[V3],
+    s: &Surface<'_>,
     face_cluster: &mut [u32],
-    normals: &[V3],
-    areas: &[f64],
     max_reach: f64,
     amplification: f64,
-    max_passes: usize,
-    rule: PlaneRule,
 ) -> usize {
-    until_settled(max_passes, || {
-        let sums = region_normal_sums(face_cluster, normals, areas);
+    let (topo, faces, pos, rule) = (s.topo, s.faces, s.pos, s.rule);
+    until_settled(64, || {
+        let sums = region_normal_sums(face_cluster, &s.normals, &s.areas);
         let n = sums.len();
         let mean: Vec<V3> = sums
             .iter()
@@ -537,16 +529,11 @@ fn region_adjacency(topo: &Topology, labels: &[u32], n: usize) -> (Vec<BTreeSet<
 /// lie on one or two plane–plane lines and collapse) into their closest neighbour, at face
 /// level, until none is left; needed again after merges made by later steps. Returns the
 /// number of merges.
-pub fn merge_collapsing_regions(
-    topo: &Topology,
-    face_cluster: &mut [u32],
-    normals: &[V3],
-    areas: &[f64],
-) -> usize {
+pub fn merge_collapsing_regions(s: &Surface<'_>, face_cluster: &mut [u32]) -> usize {
     until_settled(64, || {
-        let sums = region_normal_sums(face_cluster, normals, areas);
+        let sums = region_normal_sums(face_cluster, &s.normals, &s.areas);
         let n = sums.len();
-        let (adj, open) = region_adjacency(topo, face_cluster, n);
+        let (adj, open) = region_adjacency(s.topo, face_cluster, n);
         let bad: Vec<u32> = (0..n)
             .filter(|&c| !open[c] && !adj[c].is_empty() && adj[c].len() < 3)
             .map(|c| c as u32)

@@ -221,12 +221,10 @@ pub struct ApproxReport {
     pub vertices: usize,
     pub k_requested: usize,
     pub k_obtained: usize,
-    /// Regions after region growing, before merging.
-    pub regions_grown: usize,
-    /// Regions after merging down to K (before corner merges and fold checks).
-    pub regions_merged: usize,
-    /// Merge angle reached (larger than asked when merges above θ were needed to reach K).
-    pub final_angle_deg: f64,
+    /// What the smoothing and the partition stage did (in the JSON among the report's own
+    /// fields).
+    #[serde(flatten)]
+    pub partition: PartitionFacts,
     pub bbox_diagonal: f64,
     /// Headline error: mean over input vertices of the distance to their region's plane (a
     /// vertex on several regions counts the mean over them); planes are the final ones.
@@ -245,14 +243,9 @@ pub struct ApproxReport {
     pub flipped_faces: usize,
     /// Output faces with area ≤ 1e-12·diag².
     pub degenerate_faces: usize,
-    /// Faces moved to a neighbouring region: all three corners shared with it, or two of
-    /// three edge-neighbours in it (boundary smoothing).
-    pub faces_reassigned: usize,
     /// Regions given away face by face to their neighbours' planes instead of a merge, where
     /// an outline crossed itself (see [`outline::realise`]; counted in `merges` too).
     pub regions_dissolved: usize,
-    /// Lloyd rounds that changed the partition (see [`lloyd`]).
-    pub lloyd_rounds: usize,
     /// Regions split in two by the realisation (answering a defect, or spending the budget
     /// left on the worst fit), and regions merged into a neighbour or given away (see
     /// [`outline::realise`]).
@@ -266,11 +259,6 @@ pub struct ApproxReport {
     /// or `facing` where no draw could be realised on the least-squares planes (see
     /// [`PlaneRule`]; a note says so).
     pub plane_rule: PlaneRule,
-    /// Region merges at corners whose planes meet too far away, and of closed regions left
-    /// with fewer than three neighbours by them.
-    pub corner_merges: usize,
-    pub crease_edges: usize,
-    pub alm_rounds_normals: usize,
     pub polygons: usize,
     pub polygon_holes: usize,
     pub corners: usize,
@@ -367,8 +355,8 @@ fn best_run(
     progress: &mut dyn FnMut(Stage),
 ) -> Result<ApproxOutput, ApproxError> {
     let t = Instant::now();
-    let smoothed = smooth(mesh, topo, opts, progress)?;
-    let mut surface = outline::Surface::new(topo, mesh, &smoothed.n0, &smoothed.a0);
+    let mut surface = outline::Surface::new(topo, mesh);
+    let smoothed = smooth(mesh, &surface, opts, progress)?;
     let mut runs = Draws::default();
     // Every region on its least-squares plane first (the nearest plane); where no draw can be
     // realised so, every region on the principal plane its faces face ([`PlaneRule::Facing`]):
@@ -378,15 +366,13 @@ fn best_run(
     // realises is told so in the time of about two passes' tries plus the restarts.
     let tries_only = opts.tries.max(1) - 1;
     let last = opts.restarts.max(tries_only);
-    let least_squares = match best_on(
-        mesh, opts, last, &smoothed, &surface, t, &mut runs, progress,
-    ) {
+    let least_squares = match best_on(opts, last, &smoothed, &surface, t, &mut runs, progress) {
         Err(ApproxError::Unrealisable(why)) => why,
         done => return done,
     };
     surface.rule = PlaneRule::Facing;
     best_on(
-        mesh, opts, tries_only, &smoothed, &surface, t, &mut runs, progress,
+        opts, tries_only, &smoothed, &surface, t, &mut runs, progress,
     )
     .map_err(|e| match e {
         ApproxError::Unrealisable(facing) => ApproxError::Unrealisable(format!(
@@ -441,9 +427,7 @@ impl Draws {
 /// The draws of [`best_run`] on `surface` (its plane rule), seeds `opts.seed ..= opts.seed +
 /// last` at most, the nearest valid one kept and finished; `runs` counts the realisations
 /// made, `t` is when the whole run started.
-#[allow(clippy::too_many_arguments)]
 fn best_on(
-    mesh: &TriMesh,
     opts: &ApproxOptions,
     last: usize,
     smoothed: &Smoothed,
@@ -472,7 +456,7 @@ fn best_on(
     // itself starts, but it can start one of its own: `o`'s partition realised with merges
     // alone too (`alone`), and the mesh nearer the input kept.
     let alone = |seed: u64, part: &Partitioned, stop: &AtomicBool| {
-        realise(mesh, surface, &with_seed(seed), smoothed, part, false, stop)
+        realise(surface, &with_seed(seed), smoothed, part, false, stop)
     };
     let nearer = |o: Run, alone: Result<Run, ApproxError>| match alone {
         Ok(m) if key(&m) < key(&o) => Ok(m),
@@ -499,7 +483,7 @@ fn best_on(
         let (first, beside) = rayon::join(
             || {
                 let never = AtomicBool::new(false);
-                let first = realise(mesh, surface, &sub, smoothed, &part, true, &never);
+                let first = realise(surface, &sub, smoothed, &part, true, &never);
                 if !wanted(&first) {
                     unwanted.store(true, Ordering::Relaxed);
                 }
@@ -520,7 +504,7 @@ fn best_on(
         (out.map(|o| (o, part)), made)
     };
     let draw = |seed: u64, progress: &mut dyn FnMut(Stage)| {
-        let part = partition(mesh, surface, &with_seed(seed), smoothed, progress);
+        let part = partition(surface, &with_seed(seed), smoothed, progress);
         progress(Stage::Polygons);
         let fingerprint = outline::hash_of(&part.labels);
         let (out, made) = realised(seed, part);
@@ -541,7 +525,7 @@ fn best_on(
             return b;
         }
         let (sub, polygons) = (with_seed(b.report.seed_used), b.report.seconds.polygons);
-        let halved = finish(mesh, surface, &sub, smoothed, part, r, t, polygons);
+        let halved = finish(surface, &sub, smoothed, part, r, t, polygons);
         if key(&halved) < key(&b) {
             halved
         } else {
@@ -569,8 +553,8 @@ fn best_on(
         };
         let fills = || {
             let sub = with_seed(seed);
-            let by_input = filled(mesh, surface, &sub, smoothed, &part, true);
-            let by_smoothed = filled(mesh, surface, &sub, smoothed, &part, false)
+            let by_input = filled(surface, &sub, smoothed, &part, true);
+            let by_smoothed = filled(surface, &sub, smoothed, &part, false)
                 .filter(|fp| by_input.as_ref().is_none_or(|fi| fi.labels != fp.labels));
             let fin = |fp: Option<Partitioned>| {
                 fp.map(|fp| {
@@ -694,12 +678,9 @@ fn best_on(
     Ok(best.into())
 }
 
-/// What the seed-independent stages give every run: the input's face normals and areas, the
-/// L0-smoothed normals, the updated vertices and their face areas, and how long each stage
-/// took.
+/// What the seed-independent stages give every run: the L0-smoothed normals, the updated
+/// vertices' face areas, and how long each stage took.
 struct Smoothed {
-    n0: Vec<V3>,
-    a0: Vec<f64>,
     sm: normals_l0::NormalL0Result,
     /// Face areas of the updated surface (the vertices moved by the vertex update).
     a1: Vec<f64>,
@@ -711,10 +692,11 @@ struct Smoothed {
 /// vertex update, run once for every seed tried.
 fn smooth(
     mesh: &TriMesh,
-    topo: &Topology,
+    s: &outline::Surface<'_>,
     opts: &ApproxOptions,
     progress: &mut dyn FnMut(Stage),
 ) -> Result<Smoothed, ApproxError> {
+    let topo = s.topo;
     if opts.k == 0 {
         return Err(ApproxError::BadInput("K must be at least 1".into()));
     }
@@ -740,21 +722,18 @@ fn smooth(
             opts.k
         )));
     }
-    let (n0, a0) = face_normals_areas(&mesh.positions, &mesh.faces);
-    if let Some(f) = a0.iter().position(|&a| a <= 0.0 || !a.is_finite()) {
+    if let Some(f) = s.areas.iter().position(|&a| a <= 0.0 || !a.is_finite()) {
         return Err(ApproxError::BadInput(format!("face {f} is degenerate")));
     }
     progress(Stage::Normals);
     let t = Instant::now();
-    let sm = normals_l0::smooth_normals(&mesh.positions, topo, &n0, &opts.normals)?;
+    let sm = normals_l0::smooth_normals(s.pos, topo, &s.normals, &opts.normals)?;
     let seconds_normals = t.elapsed().as_secs_f64();
     progress(Stage::Vertices);
     let t = Instant::now();
     let p1 = vertex_update::update_vertices(mesh, topo, &sm.normals, &opts.vertices)?;
-    let (_, a1) = face_normals_areas(&p1, &mesh.faces);
+    let (_, a1) = face_normals_areas(&p1, s.faces);
     Ok(Smoothed {
-        n0,
-        a0,
         sm,
         a1,
         seconds_normals,
@@ -778,15 +757,13 @@ struct Partitioned {
 /// Stage 3, the clustering of the smoothed normals: region growing from the seed's faces,
 /// Lloyd relaxation and the merges of corners the planes cannot reach.
 fn partition(
-    mesh: &TriMesh,
     surface: &outline::Surface<'_>,
     opts: &ApproxOptions,
     smoothed: &Smoothed,
     progress: &mut dyn FnMut(Stage),
 ) -> Partitioned {
-    let (n0, a0, sm) = (&smoothed.n0, &smoothed.a0, &smoothed.sm);
+    let sm = &smoothed.sm;
     let topo = surface.topo;
-    let diag = geom::bbox_diagonal(mesh);
     progress(Stage::Cluster);
     let t = Instant::now();
     // Cluster on the smoothed normals (piecewise constant); areas from the updated surface.
@@ -814,21 +791,12 @@ fn partition(
     let mut labels = cl.face_cluster.clone();
     let lloyd_rounds = lloyd::relax(topo, &sm.normals, a1, &mut labels, opts.lloyd_rounds);
     let boundary_moves = cluster::smooth_boundaries(topo, &mut labels, 16);
-    let corner_merges = cluster::merge_unreachable_corners(
-        topo,
-        &mesh.faces,
-        &mesh.positions,
-        &mut labels,
-        n0,
-        a0,
-        opts.corner_reach_rel * diag,
-        opts.corner_amplification,
-        64,
-        surface.rule,
-    );
+    let reach = opts.corner_reach_rel * surface.diag;
+    let corner_merges =
+        cluster::merge_unreachable_corners(surface, &mut labels, reach, opts.corner_amplification);
     let facts = PartitionFacts {
-        grown: cl.grown,
-        merged: cl.count,
+        regions_grown: cl.grown,
+        regions_merged: cl.count,
         final_angle_deg: cl.final_angle_deg,
         lloyd_rounds,
         faces_reassigned: boundary_moves,
@@ -836,7 +804,7 @@ fn partition(
         crease_edges: sm.crease_edges,
         alm_rounds_normals: sm.rounds,
     };
-    settle(mesh, surface, smoothed, labels, facts, t)
+    settle(surface, labels, facts, t)
 }
 
 /// `part` with the budget its corner merges left spent as VSA spends it (its incremental
@@ -852,7 +820,6 @@ fn partition(
 /// anew; whether it is, only the realisation tells — so this is a further candidate, kept
 /// only if its realisation ends nearer the input.
 fn filled(
-    mesh: &TriMesh,
     surface: &outline::Surface<'_>,
     opts: &ApproxOptions,
     smoothed: &Smoothed,
@@ -879,7 +846,7 @@ fn filled(
         let (normals, areas) = (metric.normals, metric.areas);
         facts.lloyd_rounds += lloyd::relax(topo, normals, areas, &mut labels, opts.lloyd_rounds);
     }
-    let mut filled = settle(mesh, surface, smoothed, labels, facts, t);
+    let mut filled = settle(surface, labels, facts, t);
     filled.seconds += part.seconds;
     Some(filled)
 }
@@ -887,28 +854,18 @@ fn filled(
 /// The last steps of a partition: regions and faces that would collapse onto a line merged
 /// or moved, labels renumbered, the planes fitted and the error measured.
 fn settle(
-    mesh: &TriMesh,
     surface: &outline::Surface<'_>,
-    smoothed: &Smoothed,
     mut labels: Vec<u32>,
     mut facts: PartitionFacts,
     t: Instant,
 ) -> Partitioned {
-    let (n0, a0) = (&smoothed.n0, &smoothed.a0);
     let topo = surface.topo;
-    let diag = geom::bbox_diagonal(mesh);
-    facts.corner_merges += cluster::merge_collapsing_regions(topo, &mut labels, n0, a0);
-    facts.faces_reassigned += cluster::fix_collapsing_faces(topo, &mesh.faces, &mut labels);
+    facts.corner_merges += cluster::merge_collapsing_regions(surface, &mut labels);
+    facts.faces_reassigned += cluster::fix_collapsing_faces(surface, &mut labels);
     let n = renumber(&mut labels);
     let at = cluster::vertex_clusters(topo, &labels);
-    let planes = l1_planes(
-        &mesh.positions,
-        &at,
-        &outline::fit_planes(surface, &labels, n),
-        diag,
-        surface.rule,
-    );
-    let error = input_distances(&mesh.positions, &at, &planes).0;
+    let planes = l1_planes(surface, &at, &outline::fit_planes(surface, &labels, n));
+    let error = input_distances(surface.pos, &at, &planes).0;
     Partitioned {
         labels,
         n,
@@ -933,15 +890,10 @@ fn settle(
 /// the way, and the mesh is built again: at most 3 × regions + 1 builds. The result is kept
 /// only if it is valid and nearer the input: never worse than the realisation it started
 /// from.
-fn refit(
-    surface: &outline::Surface<'_>,
-    pos: &[V3],
-    regions_at: &[Vec<u32>],
-    r: &mut outline::Realised,
-    diag: f64,
-) {
-    let n = r.planes.len();
-    let l1 = l1_planes(pos, regions_at, &r.planes, diag, surface.rule);
+fn refit(surface: &outline::Surface<'_>, r: &mut outline::Realised) {
+    let (n, pos, diag) = (r.planes.len(), surface.pos, surface.diag);
+    let regions_at = &cluster::vertex_clusters(surface.topo, &r.labels);
+    let l1 = l1_planes(surface, regions_at, &r.planes);
     // Share of the way from the least-squares plane to the least-absolute-distances one.
     let mut t = vec![1.0f64; n];
     let mut builds = 0;
@@ -954,7 +906,7 @@ fn refit(
             .zip(&t)
             .map(|((a, b), &t)| geom::blend_planes(a, b, t))
             .collect();
-        match build_checked(surface, &r.labels, &planes, r.closes_handles, diag) {
+        match build_checked(surface, &r.labels, &planes, r.closes_handles) {
             Ok(polygons) => {
                 let error = |p: &[Plane]| input_distances(pos, regions_at, p).0;
                 let (before, after) = (error(&r.planes), error(&planes));
@@ -1000,11 +952,10 @@ fn build_checked(
     labels: &[u32],
     planes: &[Plane],
     close_handles: bool,
-    diag: f64,
 ) -> Result<polygons::PolygonMesh, Vec<u32>> {
     let polygons =
         outline::build(surface, labels, planes, close_handles).map_err(|d| d.regions())?;
-    let bad = bad_triangles(&polygons, planes, diag);
+    let bad = bad_triangles(&polygons, planes, surface.diag);
     if bad.is_empty() {
         Ok(polygons)
     } else {
@@ -1015,25 +966,19 @@ fn build_checked(
 /// Each region's least-absolute-distances plane ([`geom::l1_plane`]) of its input vertices,
 /// a vertex on `m` regions weighing `1/m` in each (so the sum over regions is the headline
 /// error, [`input_distances`]), from its plane in `start`.
-fn l1_planes(
-    pos: &[V3],
-    regions_at: &[Vec<u32>],
-    start: &[Plane],
-    diag: f64,
-    rule: PlaneRule,
-) -> Vec<Plane> {
+fn l1_planes(s: &outline::Surface<'_>, regions_at: &[Vec<u32>], start: &[Plane]) -> Vec<Plane> {
     let mut members: Vec<Vec<(V3, f64)>> = vec![Vec::new(); start.len()];
     for (v, cs) in regions_at.iter().enumerate() {
         for &c in cs {
-            members[c as usize].push((pos[v], 1.0 / cs.len() as f64));
+            members[c as usize].push((s.pos[v], 1.0 / cs.len() as f64));
         }
     }
     // Distances below this are zero at the output's precision (see `geom::l1_plane`).
-    let floor = 1e-9 * diag;
+    let floor = 1e-9 * s.diag;
     members
         .iter()
         .zip(start)
-        .map(|(m, &p)| geom::l1_plane(m, p, floor, rule))
+        .map(|(m, &p)| geom::l1_plane(m, p, floor, s.rule))
         .collect()
 }
 
@@ -1107,7 +1052,6 @@ impl From<Run> for ApproxOutput {
 /// where they cannot realise it; then stages 5–6 ([`finish`]). Ends early, unrealised, once
 /// `stop` is set.
 fn realise(
-    mesh: &TriMesh,
     surface: &outline::Surface<'_>,
     opts: &ApproxOptions,
     smoothed: &Smoothed,
@@ -1117,7 +1061,7 @@ fn realise(
 ) -> Result<Run, ApproxError> {
     let t = Instant::now();
     trace(|| {
-        let e = part.error / geom::bbox_diagonal(mesh);
+        let e = part.error / surface.diag;
         format!(
             "partition before realising: {} regions, mean distance {e:.3e}·diag",
             part.n
@@ -1126,14 +1070,12 @@ fn realise(
     let (labels, k) = (part.labels.clone(), opts.k);
     let r = outline::realise(surface, labels, part.n, k, give_away, stop)
         .map_err(|e| ApproxError::Unrealisable(format!("seed {}: {e}", opts.seed)))?;
-    Ok(finish(mesh, surface, opts, smoothed, part, r, t, 0.0))
+    Ok(finish(surface, opts, smoothed, part, r, t, 0.0))
 }
 
 /// Stages 5–6 on a realised partition (`refit`, `relabel`), then the errors, the independent
 /// fold count and the report; the polygons stage's seconds are `earlier` + those since `t`.
-#[allow(clippy::too_many_arguments)]
 fn finish(
-    mesh: &TriMesh,
     surface: &outline::Surface<'_>,
     opts: &ApproxOptions,
     smoothed: &Smoothed,
@@ -1142,12 +1084,10 @@ fn finish(
     t: Instant,
     earlier: f64,
 ) -> Run {
-    let diag = geom::bbox_diagonal(mesh);
-    let vc = cluster::vertex_clusters(surface.topo, &r.labels);
-    refit(surface, &mesh.positions, &vc, &mut r, diag);
-    if relabel::relabel(surface, &mesh.positions, &mut r, diag) {
-        let vc = cluster::vertex_clusters(surface.topo, &r.labels);
-        refit(surface, &mesh.positions, &vc, &mut r, diag);
+    let (diag, pos) = (surface.diag, surface.pos);
+    refit(surface, &mut r);
+    if relabel::relabel(surface, &mut r) {
+        refit(surface, &mut r);
     }
     let vc = cluster::vertex_clusters(surface.topo, &r.labels);
     let mut times = StageTimes {
@@ -1158,7 +1098,7 @@ fn finish(
         total: 0.0,
     };
     times.total = times.normals + times.vertices + times.cluster + times.polygons;
-    let (mean, maxd) = input_distances(&mesh.positions, &vc, &r.planes);
+    let (mean, maxd) = input_distances(pos, &vc, &r.planes);
     let mut maxp = 0.0f64;
     for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
         for &c in poly {
@@ -1217,18 +1157,15 @@ fn finish(
         ));
     }
     let rel = |x: f64| x / diag;
-    let f = &part.facts;
     let report = ApproxReport {
-        faces: mesh.faces.len(),
+        faces: surface.faces.len(),
         seed_used: opts.seed,
         runs: 1,
         seconds_all_runs: times.total,
-        vertices: mesh.positions.len(),
+        vertices: pos.len(),
         k_requested: opts.k,
         k_obtained: r.planes.len(),
-        regions_grown: f.grown,
-        regions_merged: f.merged,
-        final_angle_deg: f.final_angle_deg,
+        partition: part.facts.clone(),
         bbox_diagonal: diag,
         mean_input_distance: mean,
         mean_input_distance_rel: rel(mean),
@@ -1239,16 +1176,11 @@ fn finish(
         max_planarity_deviation_rel: rel(maxp),
         flipped_faces: flipped,
         degenerate_faces: degenerate,
-        faces_reassigned: f.faces_reassigned,
         regions_dissolved: r.dissolved,
         plane_halvings: r.plane_halvings,
         plane_rule: surface.rule,
-        lloyd_rounds: f.lloyd_rounds,
         regions_split: r.splits,
         merges: r.merges,
-        corner_merges: f.corner_merges,
-        crease_edges: f.crease_edges,
-        alm_rounds_normals: f.alm_rounds_normals,
         polygons: r.polygons.polygons.len(),
         polygon_holes: r.polygons.holes,
         corners: r.polygons.positions.len(),
@@ -1264,17 +1196,26 @@ fn finish(
     }
 }
 
-/// What the partition stage did, for the report.
-#[derive(Clone, Default)]
-struct PartitionFacts {
-    grown: usize,
-    merged: usize,
-    final_angle_deg: f64,
-    lloyd_rounds: usize,
-    faces_reassigned: usize,
-    corner_merges: usize,
-    crease_edges: usize,
-    alm_rounds_normals: usize,
+/// What the smoothing and the partition stage did, for the report.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PartitionFacts {
+    /// Regions after region growing, before merging.
+    pub regions_grown: usize,
+    /// Regions after merging down to K (before corner merges and fold checks).
+    pub regions_merged: usize,
+    /// Merge angle reached (larger than asked when merges above θ were needed to reach K).
+    pub final_angle_deg: f64,
+    /// Lloyd rounds that changed the partition (see [`lloyd`]).
+    pub lloyd_rounds: usize,
+    /// Faces moved to a neighbouring region: all three corners shared with it, or two of
+    /// three edge-neighbours in it (boundary smoothing).
+    pub faces_reassigned: usize,
+    /// Region merges at corners whose planes meet too far away, and of closed regions left
+    /// with fewer than three neighbours by them.
+    pub corner_merges: usize,
+    /// Creases the L0 smoothing kept, and its ALM rounds.
+    pub crease_edges: usize,
+    pub alm_rounds_normals: usize,
 }
 
 /// Prints what `what` says to stderr, after "approx: ", when `FOLDFREE_APPROX_TRACE` is set
@@ -1453,35 +1394,23 @@ mod tests {
     #[test]
     fn the_budget_goes_where_the_input_bends_though_the_smoothing_flattened_it() {
         let (mesh, topo) = testing::roof(8, 4);
-        let (n0, a0) = face_normals_areas(&mesh.positions, &mesh.faces);
+        let surface = outline::Surface::new(&topo, &mesh);
         let nf = mesh.faces.len();
-        let normals = vec![[0.0, 0.0, 1.0]; nf];
         let sm = normals_l0::NormalL0Result {
-            normals,
+            normals: vec![[0.0, 0.0, 1.0]; nf],
             crease_edges: 0,
             rounds: 0,
         };
         let smoothed = Smoothed {
-            n0: n0.clone(),
-            a0: a0.clone(),
             sm,
-            a1: a0.clone(),
+            a1: surface.areas.clone(),
             seconds_normals: 0.0,
             seconds_vertices: 0.0,
         };
-        let surface = outline::Surface::new(&topo, &mesh, &n0, &a0);
-        let t = Instant::now();
-        let part = settle(
-            &mesh,
-            &surface,
-            &smoothed,
-            vec![0; nf],
-            Default::default(),
-            t,
-        );
+        let part = settle(&surface, vec![0; nf], Default::default(), Instant::now());
         assert_eq!(part.n, 1);
         let o = ApproxOptions::new(2);
-        let fill = |by_input| filled(&mesh, &surface, &o, &smoothed, &part, by_input);
+        let fill = |by_input| filled(&surface, &o, &smoothed, &part, by_input);
         // By the smoothed normals there is nothing to cut.
         assert!(fill(false).is_none());
         let filled = fill(true).unwrap();
@@ -1506,14 +1435,12 @@ mod tests {
         let (positions, faces) = crate::init::test_grid::bumpy(40, |x, _| (x - 0.5).powi(2));
         let mesh = TriMesh { positions, faces };
         let topo = Topology::build(&mesh, Path::new("generated")).unwrap();
-        let (normals, areas) = face_normals_areas(&mesh.positions, &mesh.faces);
-        let surface = outline::Surface::new(&topo, &mesh, &normals, &areas);
+        let surface = outline::Surface::new(&topo, &mesh);
         let labels = vec![0; mesh.faces.len()];
         let mut r = outline::realise(&surface, labels, 1, 1, true, &Default::default()).unwrap();
         let at = cluster::vertex_clusters(&topo, &r.labels);
         let before = input_distances(&mesh.positions, &at, &r.planes).0;
-        let diag = geom::bbox_diagonal(&mesh);
-        refit(&surface, &mesh.positions, &at, &mut r, diag);
+        refit(&surface, &mut r);
         let after = input_distances(&mesh.positions, &at, &r.planes).0;
         assert!(after < 0.99 * before, "{before} → {after}");
         // The level plane at the median height is the optimum; the refit plane is level and

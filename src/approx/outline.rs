@@ -1299,8 +1299,9 @@ pub struct Surface<'a> {
     pub topo: &'a Topology,
     pub pos: &'a [V3],
     pub faces: &'a [[u32; 3]],
-    pub normals: &'a [V3],
-    pub areas: &'a [f64],
+    /// The input's unit face normals and face areas.
+    pub normals: Vec<V3>,
+    pub areas: Vec<f64>,
     /// Each vertex's faces in counter-clockwise order ([`star`]): `star_faces` from
     /// `star_start[v]` to `star_start[v + 1]`, and whether the vertex is on the border.
     star_start: Vec<u32>,
@@ -1310,8 +1311,11 @@ pub struct Surface<'a> {
     face_box: Vec<[V3; 2]>,
     /// Each face's area moments (region fits are sums of them).
     moments: Vec<Moments>,
-    /// Corners closer than this are one point (1e-6 of the bounding box diagonal, the output's
-    /// planarity tolerance).
+    /// The bounding-box diagonal of the vertices the faces use (the unit of every tolerance
+    /// and of the relative errors).
+    pub diag: f64,
+    /// Corners closer than this are one point (1e-6 of `diag`, the output's planarity
+    /// tolerance).
     tol: f64,
     /// Which principal plane of a region's faces is its plane.
     pub rule: PlaneRule,
@@ -1328,14 +1332,11 @@ pub struct Surface<'a> {
 type Halves = (usize, bool, Vec<u32>);
 
 impl<'a> Surface<'a> {
-    /// The surface of `mesh` with its face normals and areas.
-    pub fn new(
-        topo: &'a Topology,
-        mesh: &'a crate::mesh::TriMesh,
-        normals: &'a [V3],
-        areas: &'a [f64],
-    ) -> Surface<'a> {
+    /// The surface of `mesh`.
+    pub fn new(topo: &'a Topology, mesh: &'a crate::mesh::TriMesh) -> Surface<'a> {
         let (pos, faces) = (&mesh.positions[..], &mesh.faces[..]);
+        let (normals, areas) = super::geom::face_normals_areas(pos, faces);
+        let diag = super::geom::bbox_diagonal(mesh);
         let mut star_start = vec![0u32];
         let mut star_faces = Vec::new();
         let mut on_border = Vec::with_capacity(topo.n_vertices);
@@ -1360,7 +1361,8 @@ impl<'a> Surface<'a> {
             on_border,
             face_box,
             moments: Moments::of_faces(pos, faces),
-            tol: 1e-6 * crate::vol::tet::bbox_diagonal(pos),
+            diag,
+            tol: 1e-6 * diag,
             rule: PlaneRule::LeastSquares,
             splits: Mutex::default(),
         }
@@ -1426,8 +1428,8 @@ impl<'a> Surface<'a> {
     /// VSA's L2,1 metric on the input's faces (what the realisation's splits follow).
     pub(super) fn normals_metric(&self) -> super::lloyd::Normals<'_> {
         super::lloyd::Normals {
-            normals: self.normals,
-            areas: self.areas,
+            normals: &self.normals,
+            areas: &self.areas,
         }
     }
 
@@ -1582,14 +1584,14 @@ fn search(
         // The regions sharing an edge, made once per defect when first asked for.
         let pairs = std::cell::OnceCell::new();
         let pairs = || pairs.get_or_init(|| adjacent_pairs(topo, &st.labels));
-        let used = if st.n < k { st.late_splits } else { st.swaps };
-        if st.merges == 0 || (fresh && used < k) {
+        let used = if st.n < k {
+            &mut st.late_splits
+        } else {
+            &mut st.swaps
+        };
+        if st.merges == 0 || (fresh && *used < k) {
             if st.merges > 0 {
-                if st.n < k {
-                    st.late_splits += 1;
-                } else {
-                    st.swaps += 1;
-                }
+                *used += 1;
             }
             if let Some(r) = split_target(&defect, &named, fits, &st.unsplittable) {
                 if st.n < k {
@@ -1917,8 +1919,7 @@ mod tests {
     /// Runs `test` on the unit cube's surface (3×3 squares a side) with the side of each face.
     fn on_cube(test: impl FnOnce(&Surface<'_>, &[u32])) {
         let (m, t, sides) = crate::approx::testing::cube(3);
-        let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
-        test(&Surface::new(&t, &m, &normals, &areas), &sides);
+        test(&Surface::new(&t, &m), &sides);
     }
 
     /// A split replayed from the surface's record gives the labels the split gave, and a
@@ -2031,8 +2032,7 @@ mod tests {
         let faces = vec![[0, 1, 2], [3, 4, 5]];
         let m = crate::mesh::TriMesh { positions, faces };
         let t = Topology::build(&m, std::path::Path::new("touching")).unwrap();
-        let (normals, areas) = super::super::geom::face_normals_areas(&m.positions, &m.faces);
-        let s = Surface::new(&t, &m, &normals, &areas);
+        let s = Surface::new(&t, &m);
         let (labels, regions) = ([0, 1], vec![0, 1]);
         let planes = fit_planes(&s, &labels, 2);
         let touching = Defect::Touching {

@@ -13,20 +13,14 @@
 //! undone, and the whole is dropped after 8 builds or if a region ends in two pieces. Then
 //! the planes are refitted to the moved vertex sets (stage 5 again).
 
-use super::{build_checked, cluster, input_distances, outline, trace, V3};
+use super::{build_checked, cluster, input_distances, outline, trace};
 
 /// Moves faces on a region's border to the neighbouring region whose plane their vertices are
 /// nearer to, when that lowers the headline error over the realised planes, and builds the
 /// polygons again; returns whether the result was kept (valid and nearer the input). The
 /// caller then refits the planes to the new vertex sets ([`super::refit`]).
-pub(super) fn relabel(
-    surface: &outline::Surface<'_>,
-    pos: &[V3],
-    r: &mut outline::Realised,
-    diag: f64,
-) -> bool {
-    let topo = surface.topo;
-    let faces = surface.faces;
+pub(super) fn relabel(surface: &outline::Surface<'_>, r: &mut outline::Realised) -> bool {
+    let (topo, faces, pos, diag) = (surface.topo, surface.faces, surface.pos, surface.diag);
     let mut labels = r.labels.clone();
     // Faces of each region at each vertex.
     let mut count: Vec<Vec<(u32, u32)>> = vec![Vec::new(); topo.n_vertices];
@@ -128,7 +122,7 @@ pub(super) fn relabel(
         if !regions_connected(topo, &labels, r.planes.len()) {
             break;
         }
-        let named = match build_checked(surface, &labels, &r.planes, r.closes_handles, diag) {
+        let named = match build_checked(surface, &labels, &r.planes, r.closes_handles) {
             Ok(polygons) => {
                 let (b, a, m) = (before / diag, after / diag, moves.len());
                 trace(|| {
@@ -162,7 +156,6 @@ fn regions_connected(topo: &crate::mesh::Topology, labels: &[u32], n: usize) -> 
 
 #[cfg(test)]
 mod tests {
-    use super::super::geom::{self, face_normals_areas};
     use super::*;
     use crate::approx::bad_triangles;
     use crate::init::test_grid::{bumpy, id};
@@ -178,8 +171,7 @@ mod tests {
         let (positions, faces) = bumpy(k, |x, _| (x - 0.5).max(0.0));
         let mesh = TriMesh { positions, faces };
         let topo = Topology::build(&mesh, Path::new("generated")).unwrap();
-        let (normals, areas) = face_normals_areas(&mesh.positions, &mesh.faces);
-        let surface = outline::Surface::new(&topo, &mesh, &normals, &areas);
+        let surface = outline::Surface::new(&topo, &mesh);
         let mut labels: Vec<u32> = mesh
             .faces
             .iter()
@@ -194,14 +186,13 @@ mod tests {
         labels[f] = 1;
         let mut r = outline::realise(&surface, labels, 2, 2, true, &Default::default()).unwrap();
         assert_eq!(r.labels[f], 1, "the realisation kept the partition");
-        let diag = geom::bbox_diagonal(&mesh);
         let before = input_distances(
             &mesh.positions,
             &cluster::vertex_clusters(&topo, &r.labels),
             &r.planes,
         )
         .0;
-        assert!(relabel(&surface, &mesh.positions, &mut r, diag));
+        assert!(relabel(&surface, &mut r));
         assert_eq!(r.labels[f], 0);
         let after = input_distances(
             &mesh.positions,
@@ -211,7 +202,7 @@ mod tests {
         .0;
         assert!(after < before, "{before} → {after}");
         // The output is built on the same planes and passes the independent check.
-        assert!(bad_triangles(&r.polygons, &r.planes, diag).is_empty());
+        assert!(bad_triangles(&r.polygons, &r.planes, surface.diag).is_empty());
         assert_eq!(r.polygons.polygons.len(), 2);
         assert!(regions_connected(&topo, &r.labels, 2));
         // A face of region 1 set apart inside region 0 is a second piece of region 1.
