@@ -592,8 +592,7 @@ fn coincident(cs: &Corners, pos: &[V3], tol: f64) -> Option<Defect> {
 /// the chord's length) adds nothing to the outline and would give a zero-area triangle, and it
 /// belongs to this polygon alone, so it is dropped (the mesh stays watertight).
 fn region_outlines(
-    topo: &Topology,
-    faces: &[[u32; 3]],
+    s: &Surface<'_>,
     labels: &[u32],
     cs: &Corners,
     r: u32,
@@ -632,9 +631,10 @@ fn region_outlines(
             for (i, &v) in lp.iter().enumerate() {
                 let b = lp[(i + 1) % lp.len()];
                 nb.extend(
-                    topo.vertex_faces(v)
+                    s.topo
+                        .vertex_faces(v)
                         .iter()
-                        .filter(|&&f| faces[f as usize].contains(&b) && labels[f as usize] != r)
+                        .filter(|&&f| s.faces[f as usize].contains(&b) && labels[f as usize] != r)
                         .map(|&f| labels[f as usize]),
                 );
             }
@@ -780,7 +780,6 @@ fn build_sized(
     planes: &[Plane],
     regions: &mut Regions,
 ) -> Result<PolygonMesh, Defect> {
-    let (topo, faces) = (s.topo, s.faces);
     let size = regions.sizes();
     // Corners closer than the tolerance are one point at the output's precision: at one
     // junction they are merged, at two they are a defect (two corners on one point pinch the
@@ -805,7 +804,7 @@ fn build_sized(
     let all = |r: u32| {
         made[r as usize].get_or_init(|| {
             let l = regions.loops[r as usize].as_deref().unwrap_or_default();
-            region_outlines(topo, faces, &regions.labels, &cs, r, l)
+            region_outlines(s, &regions.labels, &cs, r, l)
         })
     };
     for r in 0..made.len() as u32 {
@@ -1098,8 +1097,8 @@ fn split_target(
 /// A region that meets itself at one vertex only (a pinch) has no simple outline there;
 /// moving one wedge of faces is the least change of the partition that removes it, where a
 /// split of the region may leave the pinch in one half.
-fn unpinch(topo: &Topology, faces: &[[u32; 3]], labels: &mut [u32], v: u32, r: u32) -> bool {
-    let (fs, border) = star(topo, faces, v);
+fn unpinch(s: &Surface<'_>, labels: &mut [u32], v: u32, r: u32) -> bool {
+    let (fs, border) = s.star(v);
     let m = fs.len();
     let ls: Vec<u32> = fs.iter().map(|&f| labels[f as usize]).collect();
     let label = |i: usize| ls[i];
@@ -1141,7 +1140,7 @@ fn unpinch(topo: &Topology, faces: &[[u32; 3]], labels: &mut [u32], v: u32, r: u
             }
             // The run may have held parts of r to the rest: those parts, now touching `to`
             // through the run, go with it, so both regions stay connected.
-            let mut parts = region_parts(topo, labels, r);
+            let mut parts = region_parts(s.topo, labels, r);
             parts.sort_by_key(|p| std::cmp::Reverse(p.len()));
             for p in parts.iter().skip(1) {
                 for &f in p {
@@ -1205,19 +1204,14 @@ pub(super) fn parts(
 /// the next merge grows the same region again — a cascade that ends in a few regions wrapped
 /// around the part. Giving the faces away grows each neighbour by the faces nearest its
 /// plane instead; the caller keeps whichever of the two costs less.
-fn dissolve(
-    topo: &Topology,
-    face_moments: &[Moments],
-    fits: &Regions,
-    r: u32,
-) -> Option<(Vec<u32>, f64)> {
-    let labels = &fits.labels;
+fn dissolve(s: &Surface<'_>, fits: &Regions, r: u32) -> Option<(Vec<u32>, f64)> {
+    let (labels, face_moments) = (&fits.labels, &s.moments);
     let cost = |f: usize, q: u32| face_moments[f].sq_distance(&fits.fit[q as usize].0);
     let members: Vec<usize> = fits.members[r as usize]
         .iter()
         .map(|&f| f as usize)
         .collect();
-    let given = hand_out(topo, labels, r, &members, cost)?;
+    let given = hand_out(s.topo, labels, r, &members, cost)?;
     let mut out = labels.to_vec();
     // What each neighbour gains, summed in face order (`given` follows the ascending members).
     let mut gained = vec![Moments::default(); fits.moments.len()];
@@ -1537,8 +1531,7 @@ fn search(
     give_away: bool,
     stop: &AtomicBool,
 ) -> Result<Realised, (Defect, Option<Box<Search>>)> {
-    let (topo, faces) = (s.topo, s.faces);
-    let face_moments = &s.moments[..];
+    let topo = s.topo;
     let mut resume = None;
     let stopped = || stop.load(Ordering::Relaxed);
     let mut polygons = loop {
@@ -1558,7 +1551,7 @@ fn search(
         if let Defect::Pinch { vertex, twice, .. } = defect {
             let mut trial = st.labels.clone();
             if st.unpinched < topo.n_vertices
-                && unpinch(topo, faces, &mut trial, vertex, twice)
+                && unpinch(s, &mut trial, vertex, twice)
                 && !st.seen.contains(&hash_of(&trial))
             {
                 st.labels = trial;
@@ -1648,7 +1641,7 @@ fn search(
         // takes one of them out of the junction.)
         let given = match &defect {
             Defect::Outline { region, .. } if give_away => {
-                dissolve(topo, face_moments, fits, *region).map(|d| (*region, d))
+                dissolve(s, fits, *region).map(|d| (*region, d))
             }
             _ => None,
         };
@@ -1681,17 +1674,10 @@ fn search(
     // they are realisable now.
     let mut tried = HashSet::new();
     while st.n < k && !stopped() {
-        let built = resplit(
-            s,
-            &mut st.regions,
-            start_labels,
-            &mut st.labels,
-            st.n,
-            &mut tried,
-        );
-        let Some(built) = built else { break };
+        let Some(built) = resplit(s, &mut st, start_labels, &mut tried) else {
+            break;
+        };
         polygons = built;
-        st.n += 1;
     }
     // Regions left alone at a quarter are tried again at any gain.
     st.unsplittable = vec![false; st.n];
@@ -1819,10 +1805,10 @@ fn spend_budget<M: super::lloyd::Metric>(
     last
 }
 
-/// Restores one boundary of the given partition `start` inside a region of `labels` (`n`
-/// regions) that keeps the partition realisable: the part of a region of `start` that a
-/// region of `labels` holds, connected, with the rest of that region connected, becomes
-/// region `n`. Candidates go by the residual they remove, largest first; each is built once
+/// Restores one boundary of the given partition `start` inside a region of `st.labels`
+/// (`st.n` regions) that keeps the partition realisable: the part of a region of `start` that
+/// a region of `st.labels` holds, connected, with the rest of that region connected, becomes
+/// region `st.n` (one more region). Candidates go by the residual they remove, largest first; each is built once
 /// (`tried`, keyed by its faces). The polygon mesh of the first valid one, `None` when none
 /// is.
 ///
@@ -1833,13 +1819,15 @@ fn spend_budget<M: super::lloyd::Metric>(
 /// realisable in the new surroundings, where the defect that removed them is gone.
 fn resplit(
     s: &Surface<'_>,
-    regions: &mut Regions,
+    st: &mut Search,
     start: &[u32],
-    labels: &mut [u32],
-    n: usize,
     tried: &mut HashSet<u64>,
 ) -> Option<PolygonMesh> {
     let face_moments = &s.moments[..];
+    let Search {
+        labels, regions, ..
+    } = st;
+    let n = st.n;
     regions.update(s, labels, n);
     let fits = &*regions;
     // Each connected part of a given region that one region holds, unless it is all of it
@@ -1886,7 +1874,8 @@ fn resplit(
         }
         regions.update(s, &trial, n + 1);
         if let Ok(built) = build_sized(s, &regions.planes(), regions) {
-            labels.copy_from_slice(&trial);
+            *labels = trial;
+            st.n += 1;
             return Some(built);
         }
     }
@@ -2142,7 +2131,7 @@ mod tests {
     fn resplit_restores_a_boundary_the_realisation_merged_away() {
         on_cube(|s, sides| {
             // Sides 0 (x = 0) and 2 (y = 0) share an edge: one region, the others after it.
-            let mut labels: Vec<u32> = sides
+            let labels: Vec<u32> = sides
                 .iter()
                 .map(|&q| match q {
                     0 | 2 => 0,
@@ -2150,32 +2139,21 @@ mod tests {
                     q => q - 1,
                 })
                 .collect();
-            let mut tried = HashSet::new();
-            let poly = resplit(
-                s,
-                &mut Regions::default(),
-                sides,
-                &mut labels,
-                5,
-                &mut tried,
-            )
-            .unwrap();
+            let (mut st, mut tried) = (Search::default(), HashSet::new());
+            (st.labels, st.n) = (labels, 5);
+            let poly = resplit(s, &mut st, sides, &mut tried).unwrap();
             assert_eq!(poly.polygons.len(), 6);
             assert_eq!(poly.positions.len(), 8);
             assert!(poly.polygons.iter().all(|p| p.len() == 4));
             // The same partition as the sides, up to numbering.
-            let pairs: HashSet<(u32, u32)> =
-                labels.iter().copied().zip(sides.iter().copied()).collect();
-            assert_eq!(pairs.len(), 6, "{pairs:?}");
-            assert!(resplit(
-                s,
-                &mut Regions::default(),
-                sides,
-                &mut labels,
-                6,
-                &mut tried
-            )
-            .is_none());
+            let pairs: HashSet<(u32, u32)> = st
+                .labels
+                .iter()
+                .copied()
+                .zip(sides.iter().copied())
+                .collect();
+            assert_eq!((pairs.len(), st.n), (6, 6), "{pairs:?}");
+            assert!(resplit(s, &mut st, sides, &mut tried).is_none());
         });
     }
 
@@ -2205,7 +2183,7 @@ mod tests {
             let fits = Regions::of(s, &labels, 7);
             let band = fits.fit[6].1;
             assert!(band > 1e-4, "{band}");
-            let (out, grow) = dissolve(s.topo, &s.moments, &fits, 6).unwrap();
+            let (out, grow) = dissolve(s, &fits, 6).unwrap();
             assert_eq!(out, sides);
             assert!((grow + band).abs() < 1e-9 * band, "{grow} {band}");
         });
@@ -2215,8 +2193,8 @@ mod tests {
     fn unpinch_moves_one_wedge_and_keeps_every_region_connected() {
         // 5×5 vertices: vertex 12, the centre, has six faces around it and a ring around those.
         let (m, t) = crate::approx::testing::grid(5);
-        let v = 12;
-        let (fs, border) = star(&t, &m.faces, v);
+        let (s, v) = (Surface::new(&t, &m), 12);
+        let (fs, border) = s.star(v);
         assert!(!border);
         assert_eq!(fs.len(), 6);
         // Region 0 is the ring around the star and two single faces of it, opposite each
@@ -2228,7 +2206,7 @@ mod tests {
         for r in 0..3 {
             assert_eq!(region_parts(&t, &labels, r).len(), 1, "region {r}");
         }
-        assert!(unpinch(&t, &m.faces, &mut labels, v, 0));
+        assert!(unpinch(&s, &mut labels, v, 0));
         let around: Vec<u32> = fs.iter().map(|&f| labels[f as usize]).collect();
         let runs_of_0 = (0..6)
             .filter(|&i| around[i] == 0 && around[(i + 5) % 6] != 0)
@@ -2250,13 +2228,14 @@ mod tests {
     fn a_region_touching_itself_once_is_left_alone() {
         // 5×5 vertices: vertex 12, the centre, has six faces around it and a ring around those.
         let (m, t) = crate::approx::testing::grid(5);
-        let (fs, _) = star(&t, &m.faces, 12);
+        let s = Surface::new(&t, &m);
+        let (fs, _) = s.star(12);
         let mut labels = vec![0u32; m.faces.len()];
         for (&f, l) in fs.iter().zip([1, 1, 1, 2, 2, 0]) {
             labels[f as usize] = l;
         }
         let before = labels.clone();
-        assert!(!unpinch(&t, &m.faces, &mut labels, 12, 0));
+        assert!(!unpinch(&s, &mut labels, 12, 0));
         assert_eq!(labels, before);
     }
 }
