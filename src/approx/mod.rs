@@ -109,22 +109,42 @@ pub struct ApproxOptions {
     /// than a quarter farther from the input than the partition it was given (a cascade of
     /// merges).
     pub restarts: usize,
-    /// Region-growing / merge angle θ in degrees.
-    pub angle_deg: f64,
+    /// The stages' own parameters: 1, 2 and 3.
     pub normals: NormalL0Options,
     pub vertices: VertexUpdateOptions,
-    /// Rounds of L2,1 Lloyd relaxation of the grown regions (see [`lloyd`]); 0 = off.
-    pub lloyd_rounds: usize,
+    pub partition: PartitionOptions,
+}
+
+/// Parameters of the partition stage ([`cluster`], [`lloyd`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PartitionOptions {
+    /// Region-growing / merge angle θ in degrees.
+    pub angle_deg: f64,
+    /// θ is lowered (×0.75) while region growing gives fewer than K regions, down to this.
+    pub min_angle_deg: f64,
     /// Largest normal cone half-angle (degrees) a clustering merge may create when others are
     /// left (see `cluster::ClusterOptions::max_cone_deg`).
     pub max_cone_deg: f64,
-    /// θ is lowered (×0.75) while region growing gives fewer than K regions, down to this.
-    pub min_angle_deg: f64,
+    /// Rounds of L2,1 Lloyd relaxation of the grown regions (see [`lloyd`]); 0 = off.
+    pub lloyd_rounds: usize,
     /// Regions meeting at a vertex are merged while their planes' common point is farther than
-    /// this × bbox diagonal from it (see `cluster::merge_unreachable_corners`).
+    /// this × bbox diagonal from it (see `cluster::merge_unreachable_corners`) …
     pub corner_reach_rel: f64,
     /// … and farther than this × the vertex's distance to those planes.
     pub corner_amplification: f64,
+}
+
+impl Default for PartitionOptions {
+    fn default() -> Self {
+        PartitionOptions {
+            angle_deg: 20.0,
+            min_angle_deg: 3.0,
+            max_cone_deg: 45.0,
+            lloyd_rounds: 30,
+            corner_reach_rel: 0.04,
+            corner_amplification: 8.0,
+        }
+    }
 }
 
 impl ApproxOptions {
@@ -137,10 +157,10 @@ impl ApproxOptions {
                 "option k = 0 is outside its range [1, ∞)".into(),
             ));
         }
-        if !(self.angle_deg.is_finite() && self.angle_deg > 0.0 && self.angle_deg <= 180.0) {
+        let angle = self.partition.angle_deg;
+        if !(angle.is_finite() && angle > 0.0 && angle <= 180.0) {
             return Err(ApproxError::BadInput(format!(
-                "option angle = {} is outside its range (0, 180]",
-                self.angle_deg
+                "option angle = {angle} is outside its range (0, 180]"
             )));
         }
         for (name, v) in [("tries", self.tries), ("restarts", self.restarts)] {
@@ -159,14 +179,9 @@ impl ApproxOptions {
             seed: 1,
             tries: 3,
             restarts: 4,
-            angle_deg: 20.0,
             normals: NormalL0Options::default(),
             vertices: VertexUpdateOptions::default(),
-            corner_reach_rel: 0.04,
-            corner_amplification: 8.0,
-            lloyd_rounds: 30,
-            max_cone_deg: 45.0,
-            min_angle_deg: 3.0,
+            partition: PartitionOptions::default(),
         }
     }
 }
@@ -762,15 +777,14 @@ fn partition(
     smoothed: &Smoothed,
     progress: &mut dyn FnMut(Stage),
 ) -> Partitioned {
-    let sm = &smoothed.sm;
-    let topo = surface.topo;
+    let (sm, po, topo) = (&smoothed.sm, &opts.partition, surface.topo);
     progress(Stage::Cluster);
     let t = Instant::now();
     // Cluster on the smoothed normals (piecewise constant); areas from the updated surface.
     let a1 = &smoothed.a1;
     // θ is refined while region growing yields fewer than K regions: the budget K is then
     // spent on flatter regions (smaller error, less to fold) instead of being left unused.
-    let mut angle = opts.angle_deg;
+    let mut angle = po.angle_deg;
     let cl = loop {
         let cl = cluster::cluster_faces(
             topo,
@@ -780,20 +794,20 @@ fn partition(
                 k: opts.k,
                 angle_deg: angle,
                 seed: opts.seed,
-                max_cone_deg: opts.max_cone_deg,
+                max_cone_deg: po.max_cone_deg,
             },
         );
-        if cl.grown >= opts.k || angle < opts.min_angle_deg {
+        if cl.grown >= opts.k || angle < po.min_angle_deg {
             break cl;
         }
         angle *= 0.75;
     };
     let mut labels = cl.face_cluster.clone();
-    let lloyd_rounds = lloyd::relax(topo, &sm.normals, a1, &mut labels, opts.lloyd_rounds);
+    let lloyd_rounds = lloyd::relax(topo, &sm.normals, a1, &mut labels, po.lloyd_rounds);
     let boundary_moves = cluster::smooth_boundaries(topo, &mut labels, 16);
-    let reach = opts.corner_reach_rel * surface.diag;
+    let reach = po.corner_reach_rel * surface.diag;
     let corner_merges =
-        cluster::merge_unreachable_corners(surface, &mut labels, reach, opts.corner_amplification);
+        cluster::merge_unreachable_corners(surface, &mut labels, reach, po.corner_amplification);
     let facts = PartitionFacts {
         regions_grown: cl.grown,
         regions_merged: cl.count,
@@ -844,7 +858,13 @@ fn filled(
     let mut facts = part.facts.clone();
     if !by_input {
         let (normals, areas) = (metric.normals, metric.areas);
-        facts.lloyd_rounds += lloyd::relax(topo, normals, areas, &mut labels, opts.lloyd_rounds);
+        facts.lloyd_rounds += lloyd::relax(
+            topo,
+            normals,
+            areas,
+            &mut labels,
+            opts.partition.lloyd_rounds,
+        );
     }
     let mut filled = settle(surface, labels, facts, t);
     filled.seconds += part.seconds;

@@ -64,7 +64,7 @@ pub fn run_approx(args: ApproxArgs) -> foldfree::Result<()> {
     opts.seed = args.seed;
     opts.restarts = args.restarts;
     opts.tries = args.tries;
-    opts.angle_deg = args.angle;
+    opts.partition.angle_deg = args.angle;
     opts.validate()?;
     let validate = mesh::ValidateOptions {
         max_faces: Some(element_limit(args.max_faces)),
