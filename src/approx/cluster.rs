@@ -498,8 +498,10 @@ pub fn merge_unreachable_corners(
                 merges += 1;
             }
         }
-        for l in face_cluster.iter_mut() {
-            *l = target[*l as usize];
+        if merges > 0 {
+            for l in face_cluster.iter_mut() {
+                *l = target[*l as usize];
+            }
         }
         merges
     })
@@ -538,7 +540,9 @@ pub fn merge_collapsing_regions(s: &Surface<'_>, face_cluster: &mut [u32]) -> us
             .filter(|&c| !open[c] && !adj[c].is_empty() && adj[c].len() < 3)
             .map(|c| c as u32)
             .collect();
-        merge_regions(face_cluster, &bad, &sums, &adj);
+        if !bad.is_empty() {
+            merge_regions(face_cluster, &bad, &sums, &adj);
+        }
         bad.len()
     })
 }

@@ -371,7 +371,7 @@ fn best_run(
 ) -> Result<ApproxOutput, ApproxError> {
     let t = Instant::now();
     let mut surface = outline::Surface::new(topo, mesh);
-    let smoothed = smooth(mesh, &surface, opts, progress)?;
+    let smoothed = smooth(&surface, opts, progress)?;
     let mut runs = Draws::default();
     // Every region on its least-squares plane first (the nearest plane); where no draw can be
     // realised so, every region on the principal plane its faces face ([`PlaneRule::Facing`]):
@@ -706,7 +706,6 @@ struct Smoothed {
 /// The stages before the clustering (which the seed decides): L0 normal smoothing and the
 /// vertex update, run once for every seed tried.
 fn smooth(
-    mesh: &TriMesh,
     s: &outline::Surface<'_>,
     opts: &ApproxOptions,
     progress: &mut dyn FnMut(Stage),
@@ -746,7 +745,7 @@ fn smooth(
     let seconds_normals = t.elapsed().as_secs_f64();
     progress(Stage::Vertices);
     let t = Instant::now();
-    let p1 = vertex_update::update_vertices(mesh, topo, &sm.normals, &opts.vertices)?;
+    let p1 = vertex_update::update_vertices(s.pos, s.faces, topo, &sm.normals, &opts.vertices)?;
     let (_, a1) = face_normals_areas(&p1, s.faces);
     Ok(Smoothed {
         sm,

@@ -381,7 +381,7 @@ fn corners(
     size: &[f64],
     on_loop: &[bool],
 ) -> Result<Corners, Defect> {
-    let (pos, tol) = (s.pos, s.tol);
+    let (pos, tol) = (s.pos, s.tol());
     let mut out = Corners {
         positions: Vec::new(),
         vertex: Vec::new(),
@@ -791,7 +791,7 @@ fn build_sized(
         on_loop[v as usize] = true;
     }
     let cs = corners(s, &regions.labels, planes, &size, &on_loop)?;
-    if let Some(d) = coincident(&cs, s.pos, s.tol) {
+    if let Some(d) = coincident(&cs, s.pos, s.tol()) {
         return Err(d);
     }
     let mut mesh = PolygonMesh {
@@ -816,8 +816,8 @@ fn build_sized(
         mesh.polygons.push(poly);
         mesh.region.push(r);
     }
-    let m = &mesh;
-    if let Some([a, b]) = first_crossing(&m.positions, &m.triangles, &m.triangle_region, s.tol) {
+    let (m, tol) = (&mesh, s.tol());
+    if let Some([a, b]) = first_crossing(&m.positions, &m.triangles, &m.triangle_region, tol) {
         return Err(Defect::Crossing { regions: [a, b] });
     }
     mesh.corners = cs.vertex;
@@ -1197,8 +1197,9 @@ pub(super) fn parts(
 /// Region `r` of the partition `fits` holds given away to the regions around it, face by
 /// face: each face goes to the region across one of its edges whose plane it is nearest
 /// (integrated squared distance), nearest first (region growing into `r` with the
-/// neighbours' planes as proxies, as VSA grows its regions). The labels with the regions after `r` renumbered down by one, and
-/// how much the residual grows; `None` when `r` has no neighbour.
+/// neighbours' planes as proxies, as VSA grows its regions). The labels with the regions
+/// after `r` renumbered down by one, and how much the residual grows; `None` when `r` has no
+/// neighbour.
 ///
 /// Why: a merge keeps the union of two regions, and when the defect it answers comes back
 /// the next merge grows the same region again — a cascade that ends in a few regions wrapped
@@ -1308,9 +1309,6 @@ pub struct Surface<'a> {
     /// The bounding-box diagonal of the vertices the faces use (the unit of every tolerance
     /// and of the relative errors).
     pub diag: f64,
-    /// Corners closer than this are one point (1e-6 of `diag`, the output's planarity
-    /// tolerance).
-    tol: f64,
     /// Which principal plane of a region's faces is its plane.
     pub rule: PlaneRule,
     /// The splits made so far by any realisation of this surface ([`Surface::split`]): by the
@@ -1356,7 +1354,6 @@ impl<'a> Surface<'a> {
             face_box,
             moments: Moments::of_faces(pos, faces),
             diag,
-            tol: 1e-6 * diag,
             rule: PlaneRule::LeastSquares,
             splits: Mutex::default(),
         }
@@ -1416,7 +1413,7 @@ impl<'a> Surface<'a> {
         let whole = halves[0].add(&halves[1]);
         let residual = |m: &Moments| m.fit(self.rule).map_or(0.0, |(_, r)| r);
         residual(&whole) - residual(&halves[0]) - residual(&halves[1])
-            > self.tol * self.tol * whole.area()
+            > self.tol() * self.tol() * whole.area()
     }
 
     /// VSA's L2,1 metric on the input's faces (what the realisation's splits follow).
@@ -1425,6 +1422,12 @@ impl<'a> Surface<'a> {
             normals: &self.normals,
             areas: &self.areas,
         }
+    }
+
+    /// Corners closer than this are one point: 1e-6 of the diagonal, the output's planarity
+    /// tolerance.
+    fn tol(&self) -> f64 {
+        1e-6 * self.diag
     }
 
     /// The faces around `v` in counter-clockwise order and whether `v` is on the border
@@ -1705,9 +1708,9 @@ fn search(
 /// Spends the budget `r` left (fewer than `k` regions) on halvings of its regions into the
 /// two planes that fit each best ([`super::lloyd::halve`] under [`super::lloyd::Planes`]: the
 /// cut lies where the two planes meet, so the edge their polygons share is where the faces
-/// were), worst fit first, each kept where the partition stays realisable; the number of regions added
-/// (`r.plane_halvings`, counted in `r.splits` too). `r`'s planes become its regions'
-/// least-squares planes where any was added.
+/// were), worst fit first, each kept where the partition stays realisable; the number of
+/// regions added (`r.plane_halvings`, counted in `r.splits` too). `r`'s planes become its
+/// regions' least-squares planes where any was added.
 ///
 /// Why a second halving: [`realise`] halves across the regions' normals (the cut where the
 /// normal turns, which curvature asks for); when none of those can be realised, budget left is
@@ -1808,9 +1811,9 @@ fn spend_budget<M: super::lloyd::Metric>(
 /// Restores one boundary of the given partition `start` inside a region of `st.labels`
 /// (`st.n` regions) that keeps the partition realisable: the part of a region of `start` that
 /// a region of `st.labels` holds, connected, with the rest of that region connected, becomes
-/// region `st.n` (one more region). Candidates go by the residual they remove, largest first; each is built once
-/// (`tried`, keyed by its faces). The polygon mesh of the first valid one, `None` when none
-/// is.
+/// region `st.n` (one more region). Candidates go by the residual they remove, largest
+/// first; each is built once (`tried`, keyed by its faces). The polygon mesh of the first
+/// valid one, `None` when none is.
 ///
 /// Why: the realisation answers a defect with a merge when no split is left to answer it,
 /// and each merge makes a larger region whose next defect is likelier (the cascade). The

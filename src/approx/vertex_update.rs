@@ -17,7 +17,7 @@ use super::geom::{add, face_normals_areas, mean_edge_length, rotate_min, scale, 
 use super::sparse::SpdSolver;
 use crate::linalg::pattern::BlockPattern;
 use crate::linalg::SolveError;
-use crate::mesh::{Topology, TriMesh};
+use crate::mesh::Topology;
 
 /// Parameters of [`update_vertices`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -99,21 +99,22 @@ impl EdgeLsq {
     }
 }
 
-/// Moves the vertices of `mesh` so that face f gets normal `target[f]` (unit); returns the new
-/// positions (unreferenced vertices stay where they are).
+/// Moves the vertices `pos` of `faces` so that face f gets normal `target[f]` (unit); returns
+/// the new positions (unreferenced vertices stay where they are).
 pub fn update_vertices(
-    mesh: &TriMesh,
+    pos: &[V3],
+    faces: &[[u32; 3]],
     topo: &Topology,
     target: &[V3],
     opts: &VertexUpdateOptions,
 ) -> Result<Vec<V3>, SolveError> {
-    let n = mesh.positions.len();
-    let mut x = mesh.positions.clone();
+    let n = pos.len();
+    let mut x = pos.to_vec();
     let lbar = mean_edge_length(&x, &topo.edges);
     // The pairs: every face's three edges, then (λ > 0) the wings of every interior edge,
     // with the edge they cross.
-    let mut pairs: Vec<[u32; 2]> = Vec::with_capacity(3 * mesh.faces.len());
-    for face in &mesh.faces {
+    let mut pairs: Vec<[u32; 2]> = Vec::with_capacity(3 * faces.len());
+    for face in faces {
         for k in 0..3 {
             pairs.push([face[k], face[(k + 1) % 3]]);
         }
@@ -129,7 +130,7 @@ pub fn update_vertices(
                     .find(|&v| v != i && v != j)
                     .unwrap_or(i)
             };
-            let kl = [wing(mesh.faces[f]), wing(mesh.faces[g])];
+            let kl = [wing(faces[f]), wing(faces[g])];
             pairs.push(kl.map(|v| v as u32));
             wings.push((kl, [f, g], [i, j]));
         }
@@ -137,12 +138,12 @@ pub fn update_vertices(
     let mut sys = EdgeLsq::new(n, &pairs);
     let mut spd = SpdSolver::default();
     for _ in 0..opts.rounds {
-        let (normals, areas) = face_normals_areas(&x, &mesh.faces);
+        let (normals, areas) = face_normals_areas(&x, faces);
         let abar = areas.iter().sum::<f64>() / areas.len().max(1) as f64;
         let rot = |f: usize, v: V3| rotate_min(normals[f], target[f], v);
         // Anchor in units of the Laplacian weights (which are ~1 after dividing by Ā, l̄).
         let xr = &x;
-        let edges = mesh.faces.iter().enumerate().flat_map(|(f, face)| {
+        let edges = faces.iter().enumerate().flat_map(|(f, face)| {
             let w = areas[f] / abar;
             (0..3).map(move |k| {
                 let (a, b) = (face[k] as usize, face[(k + 1) % 3] as usize);
