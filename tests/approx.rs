@@ -10,7 +10,7 @@ use std::process::Command;
 
 use common::TempDir;
 use foldfree::approx::cluster::{cluster_faces, ClusterOptions};
-use foldfree::approx::geom::{dot, face_normals_areas, PlaneRule, V3};
+use foldfree::approx::geom::{cross, dot, face_normals_areas, sub, PlaneRule, V3};
 use foldfree::approx::normals_l0::{smooth_normals, NormalL0Options};
 use foldfree::approx::outline::{self, Moments, Surface};
 use foldfree::approx::polygons::ear_clip;
@@ -604,6 +604,48 @@ fn a_run_that_lost_its_planes_to_merges_says_so() {
     };
     assert!(lost(16));
     assert!(!lost(24));
+}
+
+/// Where no partition is realised, a closed input still gets a polygon mesh: `block.obj`
+/// (tests/data) at K = 8 has none on either plane rule, and the run returns the convex
+/// polytope of at most 8 support planes — watertight and fold-free, each facet a convex
+/// polygon, every input vertex on the inner side of every plane and touched by each — and
+/// says so.
+#[test]
+fn a_closed_input_no_partition_realises_gets_its_convex_polytope() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/block.obj");
+    let (m, t, _) = foldfree::mesh::load(&path, &Default::default()).unwrap();
+    let out = approximate(&m, &t, &ApproxOptions::new(8), &mut |_| {}).unwrap();
+    let r = &out.report;
+    assert!(
+        r.notes[0].contains("no partition into K regions could be realised"),
+        "{r}"
+    );
+    assert!(r.notes[0].contains("convex polytope"), "{r}");
+    assert!(r.k_obtained <= 8 && r.polygons == r.k_obtained, "{r}");
+    assert_eq!((r.flipped_faces, r.degenerate_faces), (0, 0));
+    let poly = &out.polygons;
+    assert_watertight(&poly.polygons);
+    assert_eq!(poly.euler_characteristic(), 2);
+    let tol = 1e-9 * r.bbox_diagonal;
+    for (p, plane) in out.planes.iter().enumerate() {
+        let side = m.positions.iter().map(|&v| plane.signed_distance(v));
+        assert!(
+            side.fold(f64::MIN, f64::max).abs() <= tol,
+            "plane {p} supports the input"
+        );
+        let corners = &poly.polygons[p];
+        for i in 0..corners.len() {
+            let at = |j: usize| poly.positions[corners[(i + j) % corners.len()] as usize];
+            assert!(plane.signed_distance(at(0)).abs() <= tol, "planar");
+            let (a, b) = (sub(at(1), at(0)), sub(at(2), at(1)));
+            assert!(dot(cross(a, b), plane.n) >= 0.0, "facet {p} is convex");
+        }
+    }
+    assert!(out
+        .face_cluster
+        .iter()
+        .all(|&c| (c as usize) < out.planes.len()));
 }
 
 /// Which draw ends nearest is only known once each is finished (filled to K, realised again)

@@ -37,11 +37,15 @@
 //! again, kept if nearer; the nearest finished mesh is kept. If no draw is realised, the tries
 //! are made again with each region on the principal plane its faces face
 //! ([`geom::PlaneRule::Facing`]: a thin bent region's least-squares plane lies across it).
+//! Where that ends with no mesh, or only meshes that lost their planes, a closed connected
+//! input has one more candidate that needs no partition: the convex polytope of K support
+//! planes ([`hull`]), kept if nearer.
 //! OUT.obj is the triangulation of the polygons: the connectivity inside each region is new.
 #![forbid(unsafe_code)]
 
 pub mod cluster;
 pub mod geom;
+mod hull;
 pub mod intersect;
 pub mod lloyd;
 pub mod normals_l0;
@@ -381,36 +385,101 @@ fn best_run(
     // realises is told so in the time of about two passes' tries plus the restarts.
     let tries_only = opts.tries.max(1) - 1;
     let last = opts.restarts.max(tries_only);
-    let least_squares = match best_on(opts, last, &smoothed, &surface, t, &mut runs, progress) {
-        Err(ApproxError::Unrealisable(why)) => why,
-        done => return done,
+    let found = match best_on(opts, last, &smoothed, &surface, t, &mut runs, progress) {
+        Err(ApproxError::Unrealisable(least_squares)) => {
+            surface.rule = PlaneRule::Facing;
+            let facing = best_on(
+                opts, tries_only, &smoothed, &surface, t, &mut runs, progress,
+            );
+            facing.map_err(|e| match e {
+                ApproxError::Unrealisable(facing) => ApproxError::Unrealisable(format!(
+                    "no run of seeds {}..={} gave a valid polygon mesh of the input ({}) with \
+                     at most K = {} regions on the regions' least-squares planes (the last: \
+                     {least_squares}), nor of seeds {}..={} on the planes their faces face (the \
+                     last: {facing}); nothing was written ({})",
+                    opts.seed,
+                    opts.seed.wrapping_add(last as u64),
+                    topo.describe(),
+                    opts.k,
+                    opts.seed,
+                    opts.seed.wrapping_add(tries_only as u64),
+                    // The realisation of a partition is determined by it: other seeds help only
+                    // where they draw other partitions.
+                    if runs.seeds_one_partition() {
+                        "every seed drew the same partition, so more --restarts cannot help; a \
+                         larger K may"
+                    } else {
+                        "a larger K, or more --restarts, may"
+                    }
+                )),
+                e => e,
+            })
+        }
+        done => done,
     };
-    surface.rule = PlaneRule::Facing;
-    best_on(
-        opts, tries_only, &smoothed, &surface, t, &mut runs, progress,
-    )
-    .map_err(|e| match e {
-        ApproxError::Unrealisable(facing) => ApproxError::Unrealisable(format!(
-            "no run of seeds {}..={} gave a valid polygon mesh of the input ({}) with at most \
-             K = {} regions on the regions' least-squares planes (the last: {least_squares}), \
-             nor of seeds {}..={} on the planes their faces face (the last: {facing}); nothing \
-             was written ({})",
-            opts.seed,
-            opts.seed.wrapping_add(last as u64),
-            topo.describe(),
-            opts.k,
-            opts.seed,
-            opts.seed.wrapping_add(tries_only as u64),
-            // The realisation of a partition is determined by it: other seeds help only where
-            // they draw other partitions.
-            if runs.seeds_one_partition() {
-                "every seed drew the same partition, so more --restarts cannot help; a larger K may"
-            } else {
-                "a larger K, or more --restarts, may"
-            }
+    surface.rule = PlaneRule::default();
+    or_polytope(&surface, opts, &smoothed, found, &runs, t)
+}
+
+/// Where the search realised nothing, or only meshes that lost their planes, the convex
+/// polytope of K support planes ([`hull::polytope`]: a polygon mesh no partition is needed
+/// for, on a closed connected input), kept if it is valid and nearer the input than `found`.
+fn or_polytope(
+    surface: &outline::Surface<'_>,
+    opts: &ApproxOptions,
+    smoothed: &Smoothed,
+    found: Result<ApproxOutput, ApproxError>,
+    runs: &Draws,
+    t: Instant,
+) -> Result<ApproxOutput, ApproxError> {
+    let nearest = match &found {
+        Ok(o) => Some((
+            o.report.mean_input_distance,
+            o.report.partition_mean_input_distance,
         )),
-        e => e,
-    })
+        Err(ApproxError::Unrealisable(_)) => None,
+        Err(_) => return found,
+    };
+    if nearest.is_some_and(|(mean, part)| !lost_planes(mean, part)) {
+        return found;
+    }
+    let start = Instant::now();
+    let Some(r) = hull::polytope(surface, opts.k, opts.partition.lloyd_rounds) else {
+        trace(|| "no polytope: not one closed surface, or its facets do not close".into());
+        return found;
+    };
+    let secs = start.elapsed().as_secs_f64();
+    let mut run = assess(surface, opts, smoothed, None, r, secs);
+    let report = &mut run.report;
+    let (mean, diag) = (report.mean_input_distance, surface.diag);
+    let k = report.k_obtained;
+    trace(|| {
+        format!(
+            "the polytope: {k} planes, {:.3e}·diag, {secs:.3} s",
+            mean / diag
+        )
+    });
+    if report.flipped_faces + report.degenerate_faces > 0 || nearest.is_some_and(|n| n.0 <= mean) {
+        return found;
+    }
+    let why = nearest.map_or(
+        "no partition into K regions could be realised by its planes".into(),
+        |n| {
+            let n = n.0 / diag;
+            format!(
+                "the partitions realised lost their planes to merges (the nearest {n:.2e}·diag \
+                 from the input)"
+            )
+        },
+    );
+    let note = format!(
+        "{why}: the polygon mesh is the convex polytope of {} support planes of the input \
+         (K = {}), which closes its handles and fills its concavities",
+        report.k_obtained, opts.k
+    );
+    report.notes.insert(0, note);
+    (report.runs, report.seconds_all_runs) = (runs.made, t.elapsed().as_secs_f64());
+    Ok(run.into())
 }
 
 /// Whether a realisation lost its planes to merges (a cascade): its mean distance to the
@@ -1092,8 +1161,8 @@ fn realise(
     Ok(finish(surface, opts, smoothed, part, r, t, 0.0))
 }
 
-/// Stages 5–6 on a realised partition (`refit`, `relabel`), then the errors, the independent
-/// fold count and the report; the polygons stage's seconds are `earlier` + those since `t`.
+/// Stages 5–6 on a realised partition (`refit`, `relabel`), then [`assess`]; the polygons
+/// stage's seconds are `earlier` + those since `t`.
 fn finish(
     surface: &outline::Surface<'_>,
     opts: &ApproxOptions,
@@ -1103,21 +1172,36 @@ fn finish(
     t: Instant,
     earlier: f64,
 ) -> Run {
-    let (diag, pos) = (surface.diag, surface.pos);
     refit(surface, &mut r);
     if relabel::relabel(surface, &mut r) {
         refit(surface, &mut r);
     }
+    let polygons = earlier + t.elapsed().as_secs_f64();
+    assess(surface, opts, smoothed, Some(part), r, polygons)
+}
+
+/// The errors, the independent fold count and the report of `r`, the realisation of `part`
+/// (`None`: of no partition), `polygons` seconds after the smoothing.
+fn assess(
+    surface: &outline::Surface<'_>,
+    opts: &ApproxOptions,
+    smoothed: &Smoothed,
+    part: Option<&Partitioned>,
+    r: outline::Realised,
+    polygons: f64,
+) -> Run {
+    let (diag, pos) = (surface.diag, surface.pos);
     let vc = cluster::vertex_clusters(surface.topo, &r.labels);
     let mut times = StageTimes {
         normals: smoothed.seconds_normals,
         vertices: smoothed.seconds_vertices,
-        cluster: part.seconds,
-        polygons: earlier + t.elapsed().as_secs_f64(),
+        cluster: part.map_or(0.0, |p| p.seconds),
+        polygons,
         total: 0.0,
     };
     times.total = times.normals + times.vertices + times.cluster + times.polygons;
     let (mean, maxd) = input_distances(pos, &vc, &r.planes);
+    let part_error = part.map_or(mean, |p| p.error);
     let mut maxp = 0.0f64;
     for (poly, &reg) in r.polygons.polygons.iter().zip(&r.polygons.region) {
         for &c in poly {
@@ -1145,14 +1229,14 @@ fn finish(
             r.defects.len()
         ));
     }
-    if lost_planes(mean, part.error) {
+    if lost_planes(mean, part_error) {
         notes.push(format!(
             "the polygon mesh is {:.1}× farther from the input than the partition it realises \
              ({:.2e}·diag against {:.2e}·diag): merges took planes where the partition \
              needed them (a larger K, or other seeds, may keep them)",
-            mean / part.error,
+            mean / part_error,
             mean / diag,
-            part.error / diag
+            part_error / diag
         ));
     }
     if surface.rule == PlaneRule::Facing {
@@ -1184,11 +1268,11 @@ fn finish(
         vertices: pos.len(),
         k_requested: opts.k,
         k_obtained: r.planes.len(),
-        partition: part.facts.clone(),
+        partition: part.map(|p| p.facts.clone()).unwrap_or_default(),
         bbox_diagonal: diag,
         mean_input_distance: mean,
         mean_input_distance_rel: rel(mean),
-        partition_mean_input_distance: part.error,
+        partition_mean_input_distance: part_error,
         max_input_distance: maxd,
         max_input_distance_rel: rel(maxd),
         max_planarity_deviation: maxp,

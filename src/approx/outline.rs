@@ -820,12 +820,11 @@ fn build_sized(
     if let Some([a, b]) = first_crossing(&m.positions, &m.triangles, &m.triangle_region, tol) {
         return Err(Defect::Crossing { regions: [a, b] });
     }
-    mesh.corners = cs.vertex;
     Ok(mesh)
 }
 
 /// A partition realised as a polygon mesh.
-#[derive(Clone)]
+#[derive(Clone, Default)]
 pub struct Realised {
     pub polygons: PolygonMesh,
     /// Region of each face, numbered `0..planes.len()`.
@@ -2121,7 +2120,6 @@ mod tests {
             polygons: vec![bridged],
             region: vec![0],
             holes: 1,
-            corners: vec![0; 8],
             ..Default::default()
         };
         assert_eq!(mesh.euler_characteristic(), 0);

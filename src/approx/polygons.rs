@@ -14,10 +14,9 @@ use crate::mesh::{Topology, NO_FACE};
 /// Polygons over a shared list of corner vertices.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PolygonMesh {
-    /// Mesh vertex of each corner (positions are the output mesh's).
-    pub corners: Vec<u32>,
+    /// The corners' positions.
     pub positions: Vec<V3>,
-    /// One polygon per region (indices into `corners`), holes bridged in.
+    /// One polygon per region (indices into `positions`), holes bridged in.
     pub polygons: Vec<Vec<u32>>,
     /// Region of each polygon.
     pub region: Vec<u32>,
