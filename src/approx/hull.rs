@@ -11,9 +11,10 @@
 //! its distance to the input, measured as every output's, and the caller keeps it only where
 //! no realised partition is nearer.
 //!
-//! The planes come from a Lloyd iteration on the faces: each face to the support plane nearest
-//! its centroid, each plane's normal the area-weighted mean normal of its faces, the plane then
-//! moved out until it touches the input; the normals start spread by farthest-point sampling.
+//! The planes come from Lloyd rounds on the distance itself: each face to the support plane
+//! nearest its centroid, each plane turned towards its faces' mean normal as far as brings it
+//! nearer their centroid; they start from normals spread by farthest-point sampling and one
+//! spherical k-means step.
 
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -39,7 +39,7 @@
 //! ([`geom::PlaneRule::Facing`]: a thin bent region's least-squares plane lies across it).
 //! Where that ends with no mesh, or only meshes that lost their planes, a closed connected
 //! input has one more candidate that needs no partition: the convex polytope of K support
-//! planes ([`hull`]), kept if nearer.
+//! planes (`hull.rs`), kept if nearer.
 //! OUT.obj is the triangulation of the polygons: the connectivity inside each region is new.
 #![forbid(unsafe_code)]
 
