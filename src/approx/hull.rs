@@ -21,8 +21,8 @@ use std::collections::HashMap;
 
 use super::cluster::region_normal_sums;
 use super::geom::{add, cross, dot, normalize, scale, sub, Plane, V3};
-use super::outline::{Realised, Surface};
-use super::polygons::PolygonMesh;
+use super::outline::{Moments, Realised, Surface};
+use super::polygons::{basis, PolygonMesh};
 
 /// No plane bounds this edge yet (an edge of the starting square).
 const OPEN: usize = usize::MAX;
@@ -47,16 +47,6 @@ pub fn polytope(s: &Surface<'_>, k: usize, rounds: usize) -> Option<Realised> {
         .sum();
     let out = if volume < 0.0 { -1.0 } else { 1.0 };
     let normals: Vec<V3> = s.normals.iter().map(|&n| scale(n, out)).collect();
-    let centroids: Vec<V3> = s
-        .faces
-        .iter()
-        .map(|f| {
-            scale(
-                f.iter().fold([0.0; 3], |c, &i| add(c, s.pos[i as usize])),
-                1.0 / 3.0,
-            )
-        })
-        .collect();
     let mut used: Vec<u32> = s.faces.iter().flatten().copied().collect();
     used.sort_unstable();
     used.dedup();
@@ -68,8 +58,9 @@ pub fn polytope(s: &Surface<'_>, k: usize, rounds: usize) -> Option<Realised> {
             .fold(f64::MIN, f64::max),
     };
     let nearest = |planes: &[Plane], f: usize| {
+        let c = s.moments(f).centroid();
         (0..planes.len())
-            .map(|j| (j as u32, -planes[j].signed_distance(centroids[f])))
+            .map(|j| (j as u32, -planes[j].signed_distance(c)))
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .unwrap_or((0, 0.0))
     };
@@ -102,10 +93,9 @@ pub fn polytope(s: &Surface<'_>, k: usize, rounds: usize) -> Option<Realised> {
     let (mut labels, mut cost) = assign(&planes);
     for _ in 0..rounds {
         let sums = region_normal_sums(&labels, &normals, &s.areas);
-        let mut centre = vec![([0.0; 3], 0.0); planes.len()];
+        let mut region = vec![Moments::default(); planes.len()];
         for (f, &j) in labels.iter().enumerate() {
-            let c = &mut centre[j as usize];
-            *c = (add(c.0, scale(centroids[f], s.areas[f])), c.1 + s.areas[f]);
+            region[j as usize] = region[j as usize].add(s.moments(f));
         }
         // A plane's faces are nearest it on the whole when their area-weighted centroid is:
         // the support plane is moved towards its faces' mean normal (the L2,1 step) as far as
@@ -114,10 +104,10 @@ pub fn polytope(s: &Surface<'_>, k: usize, rounds: usize) -> Option<Realised> {
             .par_iter()
             .enumerate()
             .map(|(j, &p)| {
-                let (Some(m), (c, a)) = (sums.get(j).and_then(|&m| normalize(m)), centre[j]) else {
+                let Some(m) = sums.get(j).and_then(|&m| normalize(m)) else {
                     return p;
                 };
-                let c = scale(c, 1.0 / a);
+                let c = region[j].centroid();
                 [0.25, 0.5, 1.0]
                     .iter()
                     .filter_map(|&t| normalize(add(scale(p.n, 1.0 - t), scale(m, t))))
@@ -225,17 +215,11 @@ fn facets(planes: &[Plane], centre: V3, diag: f64) -> Option<Vec<Vec<V3>>> {
         .iter()
         .enumerate()
         .map(|(j, p)| {
-            let helper = if p.n[0].abs() < 0.9 {
-                [1.0, 0.0, 0.0]
-            } else {
-                [0.0, 1.0, 0.0]
-            };
-            let u = normalize(cross(helper, p.n)).expect("helper is not along n");
-            let w = cross(p.n, u);
+            let (u, w) = basis(p.n);
             let c = sub(centre, scale(p.n, p.signed_distance(centre)));
             let at = |a: f64, b: f64| add(c, add(scale(u, a * r), scale(w, b * r)));
             // (corner, plane bounding the edge from it to the next)
-            let mut poly: Vec<(V3, usize)> = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+            let mut poly: Vec<(V3, usize)> = [(1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)]
                 .iter()
                 .map(|&(a, b)| (at(a, b), OPEN))
                 .collect();

@@ -1396,6 +1396,11 @@ impl<'a> Surface<'a> {
         halved
     }
 
+    /// Face `f`'s area moments (its area-weighted centroid: [`Moments::centroid`]).
+    pub fn moments(&self, f: usize) -> &Moments {
+        &self.moments[f]
+    }
+
     /// Whether regions `a` and `b` of `labels` (a region just halved) fit two planes better
     /// than one by more than the output's precision: their squared distance to their planes
     /// is lower than the union's to its plane by more than the tolerance squared over the
