@@ -231,9 +231,10 @@ pub struct StageTimes {
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ApproxReport {
     pub faces: usize,
-    /// Seed of the run returned (see `ApproxOptions::restarts`) and how many realisations the
-    /// search used (made ahead on a spare core and not used: not counted).
-    pub seed_used: u64,
+    /// Seed of the run returned (see `ApproxOptions::restarts`; `None`: the convex polytope,
+    /// which no seed's partition made) and how many realisations the search used (made ahead
+    /// on a spare core and not used: not counted).
+    pub seed_used: Option<u64>,
     pub runs: usize,
     /// Wall time of all runs together (what the caller waited).
     pub seconds_all_runs: f64,
@@ -276,7 +277,8 @@ pub struct ApproxReport {
     pub plane_halvings: usize,
     /// How each region's plane was chosen among its faces' principal planes: `least_squares`,
     /// or `facing` where no draw could be realised on the least-squares planes (see
-    /// [`PlaneRule`]; a note says so).
+    /// [`PlaneRule`]; a note says so). The polytope's planes (`seed_used` `None`) are support
+    /// planes: the field then reads `least_squares`.
     pub plane_rule: PlaneRule,
     pub polygons: usize,
     pub polygon_holes: usize,
@@ -608,7 +610,7 @@ fn best_on(
         if outline::spend_on_two_planes(surface, &mut r, opts.k) == 0 {
             return b;
         }
-        let (sub, polygons) = (with_seed(b.report.seed_used), b.report.seconds.polygons);
+        let (sub, polygons) = (with_seed(b.report.options.seed), b.report.seconds.polygons);
         let halved = finish(surface, &sub, smoothed, part, r, t, polygons);
         if key(&halved) < key(&b) {
             halved
@@ -626,7 +628,7 @@ fn best_on(
     //   signal: where the input is noisy, its cuts follow the shape), realised: further
     //   candidates — they replace no draw, so no run ends farther from the input for them.
     let tail = |b: Run, part: Partitioned| -> Result<(Run, usize), ApproxError> {
-        let seed = b.report.seed_used;
+        let seed = b.report.options.seed;
         let dissolved = b.report.regions_dissolved > 0 && b.report.k_obtained == opts.k;
         let first = || {
             if dissolved {
@@ -722,7 +724,7 @@ fn best_on(
             Some(b) if i == last => {
                 let (run, part) = drawn[b].clone();
                 progress(Stage::Cluster);
-                let seed = run.report.seed_used;
+                let seed = run.report.options.seed;
                 let (d, t) = rayon::join(|| draw(seed_of(i), &mut |_| {}), || tail(run, part));
                 speculated = Some((seed, t));
                 vec![d]
@@ -741,7 +743,7 @@ fn best_on(
     }
     let tails: Vec<_> = drawn
         .into_iter()
-        .map(|d| (speculated.take_if(|s| s.0 == d.0.report.seed_used), d))
+        .map(|d| (speculated.take_if(|s| s.0 == d.0.report.options.seed), d))
         .collect::<Vec<_>>()
         .into_par_iter()
         .map(|(s, (run, part))| s.map_or_else(|| tail(run, part), |(_, t)| t))
@@ -1262,7 +1264,7 @@ fn assess(
     let rel = |x: f64| x / diag;
     let report = ApproxReport {
         faces: surface.faces.len(),
-        seed_used: opts.seed,
+        seed_used: part.map(|_| opts.seed),
         runs: 1,
         seconds_all_runs: times.total,
         vertices: pos.len(),
@@ -1340,7 +1342,6 @@ fn renumber(labels: &mut [u32]) -> usize {
     map.len()
 }
 
-/// Meshes the unit tests of the stages share.
 /// The summary `foldfree approx` prints: regions and polygons, then distances and folds, then
 /// the notes (no trailing newline).
 impl std::fmt::Display for ApproxReport {
@@ -1348,7 +1349,7 @@ impl std::fmt::Display for ApproxReport {
         let r = self;
         write!(
             f,
-            "foldfree approx: {} faces → {} regions (K = {}), {} polygons, {} corners, {:.2} s ({} run{}, seed {} kept)",
+            "foldfree approx: {} faces → {} regions (K = {}), {} polygons, {} corners, {:.2} s ({} run{}, {} kept)",
             r.faces,
             r.k_obtained,
             r.k_requested,
@@ -1358,6 +1359,7 @@ impl std::fmt::Display for ApproxReport {
             r.runs,
             if r.runs == 1 { "" } else { "s" },
             r.seed_used
+                .map_or("the polytope".into(), |s| format!("seed {s}"))
         )?;
         write!(
             f,
@@ -1376,6 +1378,7 @@ impl std::fmt::Display for ApproxReport {
     }
 }
 
+/// Meshes the unit tests of the stages share.
 #[cfg(test)]
 pub(crate) mod testing {
     use crate::mesh::{Topology, TriMesh};
