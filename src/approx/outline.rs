@@ -59,6 +59,9 @@ pub struct Moments {
     second: [f64; 6],
     /// Σ area-weighted normals (orients the plane).
     normal: V3,
+    /// The input vertices' share of the faces (each vertex one, shared equally by its faces;
+    /// set by [`Surface::new`], zero elsewhere): what the headline error weighs them by.
+    weight: f64,
 }
 
 impl Moments {
@@ -74,6 +77,7 @@ impl Moments {
             first: scale(s, area / 3.0),
             second,
             normal: an,
+            weight: 0.0,
         }
     }
 
@@ -86,6 +90,17 @@ impl Moments {
                 Moments::triangle(a, b, c)
             })
             .collect()
+    }
+
+    /// A squared distance integrated over the faces (`residual`, per unit area) as the
+    /// headline error weighs it: per input vertex, the faces' vertices taken as spread evenly
+    /// over their area.
+    fn per_vertex(&self, residual: f64) -> f64 {
+        if self.area > 0.0 {
+            residual * self.weight / self.area
+        } else {
+            0.0
+        }
     }
 
     /// The area of the faces.
@@ -109,6 +124,7 @@ impl Moments {
             first: scale(o.first, -1.0),
             second: o.second.map(|x| -x),
             normal: scale(o.normal, -1.0),
+            weight: -o.weight,
         };
         self.add(&neg)
     }
@@ -141,6 +157,7 @@ impl Moments {
             first: add(self.first, o.first),
             second,
             normal: add(self.normal, o.normal),
+            weight: self.weight + o.weight,
         }
     }
 
@@ -1030,10 +1047,19 @@ impl Regions {
         self.fit.iter().map(|f| f.0).collect()
     }
 
-    /// How much worse the merged region fits than the two apart.
+    /// How much worse the merged region fits than the two apart, per input vertex
+    /// ([`Moments::per_vertex`]).
+    ///
+    /// Why per vertex: the run is judged by the mean distance of the input's vertices; on a
+    /// mesh whose vertices are not spread evenly (CAD: fillets and small features finely
+    /// meshed, large flat faces in a few triangles) the merge that costs least per unit area
+    /// can be the one that costs most by that error.
     fn merge_cost(&self, (a, b): (u32, u32)) -> f64 {
-        let merged = self.moments[a as usize].add(&self.moments[b as usize]);
-        self.fit_of(&merged).1 - self.fit[a as usize].1 - self.fit[b as usize].1
+        let (ma, mb) = (&self.moments[a as usize], &self.moments[b as usize]);
+        let merged = ma.add(mb);
+        merged.per_vertex(self.fit_of(&merged).1)
+            - ma.per_vertex(self.fit[a as usize].1)
+            - mb.per_vertex(self.fit[b as usize].1)
     }
 
     /// The adjacent pair among `pairs` whose merge costs least (each cost a plane fit,
@@ -1219,9 +1245,11 @@ fn dissolve(s: &Surface<'_>, fits: &Regions, r: u32) -> Option<(Vec<u32>, f64)> 
         out[f] = q;
         gained[q as usize] = gained[q as usize].add(&face_moments[f]);
     }
-    let mut grow = -fits.fit[r as usize].1;
+    let m = &fits.moments;
+    let mut grow = -m[r as usize].per_vertex(fits.fit[r as usize].1);
     for (q, g) in gained.iter().enumerate().filter(|(_, g)| g.area > 0.0) {
-        grow += fits.fit_of(&fits.moments[q].add(g)).1 - fits.fit[q].1;
+        let grown = m[q].add(g);
+        grow += grown.per_vertex(fits.fit_of(&grown).1) - m[q].per_vertex(fits.fit[q].1);
     }
     for l in out.iter_mut() {
         if *l > r {
@@ -1351,7 +1379,7 @@ impl<'a> Surface<'a> {
             star_faces,
             on_border,
             face_box,
-            moments: Moments::of_faces(pos, faces),
+            moments: vertex_weighted(topo, pos, faces),
             diag,
             rule: PlaneRule::LeastSquares,
             splits: Mutex::default(),
@@ -1443,6 +1471,19 @@ impl<'a> Surface<'a> {
             self.on_border[v as usize],
         )
     }
+}
+
+/// Each face's area moments with its share of the input vertices (`Moments::weight`: each
+/// vertex weighs one, shared equally by its faces).
+fn vertex_weighted(topo: &Topology, pos: &[V3], faces: &[[u32; 3]]) -> Vec<Moments> {
+    let mut m = Moments::of_faces(pos, faces);
+    for (m, f) in m.iter_mut().zip(faces) {
+        m.weight = f
+            .iter()
+            .map(|&v| 1.0 / topo.vertex_faces(v).len() as f64)
+            .sum();
+    }
+    m
 }
 
 /// A fingerprint of a list of labels or faces (64 bits), for the sets of partitions seen or
@@ -2187,11 +2228,23 @@ mod tests {
                 })
                 .collect();
             let fits = Regions::of(s, &labels, 7);
-            let band = fits.fit[6].1;
-            assert!(band > 1e-4, "{band}");
+            assert!(fits.fit[6].1 > 1e-4, "{:?}", fits.fit[6]);
+            // The band's residual, per input vertex as the costs compare it.
+            let band = fits.moments[6].per_vertex(fits.fit[6].1);
             let (out, grow) = dissolve(s, &fits, 6).unwrap();
             assert_eq!(out, sides);
             assert!((grow + band).abs() < 1e-9 * band, "{grow} {band}");
+        });
+    }
+
+    #[test]
+    fn the_faces_share_out_each_input_vertex_once() {
+        on_cube(|s, _| {
+            let total: f64 = s.moments.iter().map(|m| m.weight).sum();
+            assert!((total - s.pos.len() as f64).abs() < 1e-9 * total, "{total}");
+            // Per vertex: the residual per unit area times the vertices per unit area.
+            let all = s.moments.iter().fold(Moments::default(), |a, m| a.add(m));
+            assert_eq!(all.per_vertex(2.0), 2.0 * total / all.area());
         });
     }
 
