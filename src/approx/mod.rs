@@ -423,9 +423,11 @@ fn best_run(
     or_polytope(&surface, opts, &smoothed, found, &runs, t)
 }
 
-/// Where the search realised nothing, or only meshes that lost their planes, the convex
-/// polytope of K support planes ([`hull::polytope`]: a polygon mesh no partition is needed
-/// for, on a closed connected input), kept if it is valid and nearer the input than `found`.
+/// Where the search realised nothing, or only a mesh that lost its planes (to a cascade of
+/// merges: farther from the input than its partition, or fewer than K regions — merges the
+/// budget could not win back), the convex polytope of K support planes ([`hull::polytope`]: a
+/// polygon mesh no partition is needed for, on a closed connected input), kept if it is valid
+/// and nearer the input than `found`.
 fn or_polytope(
     surface: &outline::Surface<'_>,
     opts: &ApproxOptions,
@@ -438,11 +440,12 @@ fn or_polytope(
         Ok(o) => Some((
             o.report.mean_input_distance,
             o.report.partition_mean_input_distance,
+            o.report.k_obtained,
         )),
         Err(ApproxError::Unrealisable(_)) => None,
         Err(_) => return found,
     };
-    if nearest.is_some_and(|(mean, part)| !lost_planes(mean, part)) {
+    if nearest.is_some_and(|(mean, part, k)| !lost_planes(mean, part) && k >= opts.k) {
         return found;
     }
     let start = Instant::now();
@@ -467,10 +470,10 @@ fn or_polytope(
     let why = nearest.map_or(
         "no partition into K regions could be realised by its planes".into(),
         |n| {
-            let n = n.0 / diag;
+            let (d, k) = (n.0 / diag, n.2);
             format!(
-                "the partitions realised lost their planes to merges (the nearest {n:.2e}·diag \
-                 from the input)"
+                "the partitions realised lost their planes to merges (the nearest, {k} regions, \
+                 {d:.2e}·diag from the input)"
             )
         },
     );
