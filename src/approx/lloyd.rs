@@ -508,7 +508,7 @@ mod tests {
     fn two_plane_split_moves_the_cut_to_an_off_centre_ridge() {
         let (n, r) = (12usize, 3usize);
         let (mesh, topo) = crate::approx::testing::roof(n as u32, r as u32);
-        let moments = Moments::of_faces(&mesh.positions, &mesh.faces);
+        let moments = Moments::of_faces(&topo, &mesh.positions, &mesh.faces);
         let mut labels = vec![0u32; 2 * n];
         assert!(halve(
             &topo,

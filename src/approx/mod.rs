@@ -37,9 +37,8 @@
 //! again, kept if nearer; the nearest finished mesh is kept. If no draw is realised, the tries
 //! are made again with each region on the principal plane its faces face
 //! ([`geom::PlaneRule::Facing`]: a thin bent region's least-squares plane lies across it).
-//! Where that ends with no mesh, or only meshes that lost their planes, a closed connected
-//! input has one more candidate that needs no partition: the convex polytope of K support
-//! planes (`hull.rs`), kept if nearer.
+//! A closed connected input has one more candidate that needs no partition: the convex
+//! polytope of K support planes (`hull.rs`), kept if nearer.
 //! OUT.obj is the triangulation of the polygons: the connectivity inside each region is new.
 #![forbid(unsafe_code)]
 
@@ -277,9 +276,9 @@ pub struct ApproxReport {
     pub plane_halvings: usize,
     /// How each region's plane was chosen among its faces' principal planes: `least_squares`,
     /// or `facing` where no draw could be realised on the least-squares planes (see
-    /// [`PlaneRule`]; a note says so). The polytope's planes (`seed_used` `None`) are support
-    /// planes: the field then reads `least_squares`.
-    pub plane_rule: PlaneRule,
+    /// [`PlaneRule`]; a note says so); `None` (JSON `null`) for the polytope (`seed_used`
+    /// `None`), whose planes are support planes, no fit of a region's faces.
+    pub plane_rule: Option<PlaneRule>,
     pub polygons: usize,
     pub polygon_holes: usize,
     pub corners: usize,
@@ -378,6 +377,33 @@ fn best_run(
     let t = Instant::now();
     let mut surface = outline::Surface::new(topo, mesh);
     let smoothed = smooth(&surface, opts, progress)?;
+    // The polytope needs no partition: made beside the search (on a surface of its own, the
+    // search's changes its plane rule), in the time its threads leave idle.
+    std::thread::scope(|scope| {
+        let polytope = scope.spawn(|| {
+            let start = Instant::now();
+            let own = outline::Surface::new(topo, mesh);
+            let r = hull::polytope(&own, opts.k, opts.partition.lloyd_rounds);
+            (r, start.elapsed().as_secs_f64())
+        });
+        let found = search(&mut surface, opts, &smoothed, t, progress);
+        let polytope = polytope
+            .join()
+            .unwrap_or_else(|e| std::panic::resume_unwind(e));
+        surface.rule = PlaneRule::default();
+        or_polytope(&surface, opts, &smoothed, found, polytope, t)
+    })
+}
+
+/// The draws of [`best_run`]: on the least-squares planes, then on the facing ones.
+fn search(
+    surface: &mut outline::Surface<'_>,
+    opts: &ApproxOptions,
+    smoothed: &Smoothed,
+    t: Instant,
+    progress: &mut dyn FnMut(Stage),
+) -> (Result<ApproxOutput, ApproxError>, usize) {
+    let topo = surface.topo;
     let mut runs = Draws::default();
     // Every region on its least-squares plane first (the nearest plane); where no draw can be
     // realised so, every region on the principal plane its faces face ([`PlaneRule::Facing`]):
@@ -387,12 +413,10 @@ fn best_run(
     // realises is told so in the time of about two passes' tries plus the restarts.
     let tries_only = opts.tries.max(1) - 1;
     let last = opts.restarts.max(tries_only);
-    let found = match best_on(opts, last, &smoothed, &surface, t, &mut runs, progress) {
+    let found = match best_on(opts, last, smoothed, surface, t, &mut runs, progress) {
         Err(ApproxError::Unrealisable(least_squares)) => {
             surface.rule = PlaneRule::Facing;
-            let facing = best_on(
-                opts, tries_only, &smoothed, &surface, t, &mut runs, progress,
-            );
+            let facing = best_on(opts, tries_only, smoothed, surface, t, &mut runs, progress);
             facing.map_err(|e| match e {
                 ApproxError::Unrealisable(facing) => ApproxError::Unrealisable(format!(
                     "no run of seeds {}..={} gave a valid polygon mesh of the input ({}) with \
@@ -419,41 +443,40 @@ fn best_run(
         }
         done => done,
     };
-    surface.rule = PlaneRule::default();
-    or_polytope(&surface, opts, &smoothed, found, &runs, t)
+    (found, runs.made)
 }
 
-/// Where the search realised nothing, or only a mesh that lost its planes (to a cascade of
-/// merges: farther from the input than its partition, or fewer than K regions — merges the
-/// budget could not win back), the convex polytope of K support planes ([`hull::polytope`]: a
-/// polygon mesh no partition is needed for, on a closed connected input), kept if it is valid
-/// and nearer the input than `found`.
+/// A closed connected input has one more candidate that needs no partition: the convex
+/// polytope of K support planes ([`hull::polytope`], made beside the search, with its
+/// seconds), kept if it is valid and nearer the input than `found` (what the search found,
+/// with the realisations it made), or where the search realised nothing.
+///
+/// Why on every such run, not only where the search failed or lost its planes: which is
+/// nearer is only known once both are measured, and the polytope costs a Lloyd iteration
+/// over the faces, a small share of a search's time (BENCHMARKS, planar approximation round
+/// 37). A rule for when to skip it would be one more threshold to be wrong on an unseen
+/// part.
 fn or_polytope(
     surface: &outline::Surface<'_>,
     opts: &ApproxOptions,
     smoothed: &Smoothed,
-    found: Result<ApproxOutput, ApproxError>,
-    runs: &Draws,
+    (mut found, runs): (Result<ApproxOutput, ApproxError>, usize),
+    (polytope, secs): (Option<outline::Realised>, f64),
     t: Instant,
 ) -> Result<ApproxOutput, ApproxError> {
+    if let Ok(o) = &mut found {
+        // What the caller waited: the polytope may have ended after the search.
+        o.report.seconds_all_runs = t.elapsed().as_secs_f64();
+    }
     let nearest = match &found {
-        Ok(o) => Some((
-            o.report.mean_input_distance,
-            o.report.partition_mean_input_distance,
-            o.report.k_obtained,
-        )),
+        Ok(o) => Some((o.report.mean_input_distance, o.report.k_obtained)),
         Err(ApproxError::Unrealisable(_)) => None,
         Err(_) => return found,
     };
-    if nearest.is_some_and(|(mean, part, k)| !lost_planes(mean, part) && k >= opts.k) {
-        return found;
-    }
-    let start = Instant::now();
-    let Some(r) = hull::polytope(surface, opts.k, opts.partition.lloyd_rounds) else {
+    let Some(r) = polytope else {
         trace(|| "no polytope: not one closed surface, or its facets do not close".into());
         return found;
     };
-    let secs = start.elapsed().as_secs_f64();
     let mut run = assess(surface, opts, smoothed, None, r, secs);
     let report = &mut run.report;
     let (mean, diag) = (report.mean_input_distance, surface.diag);
@@ -469,12 +492,9 @@ fn or_polytope(
     }
     let why = nearest.map_or(
         "no partition into K regions could be realised by its planes".into(),
-        |n| {
-            let (d, k) = (n.0 / diag, n.2);
-            format!(
-                "the partitions realised lost their planes to merges (the nearest, {k} regions, \
-                 {d:.2e}·diag from the input)"
-            )
+        |(d, k)| {
+            let d = d / diag;
+            format!("the nearest partition realised ({k} regions, {d:.2e}·diag) is farther away")
         },
     );
     let note = format!(
@@ -483,7 +503,7 @@ fn or_polytope(
         report.k_obtained, opts.k
     );
     report.notes.insert(0, note);
-    (report.runs, report.seconds_all_runs) = (runs.made, t.elapsed().as_secs_f64());
+    (report.runs, report.seconds_all_runs) = (runs, t.elapsed().as_secs_f64());
     Ok(run.into())
 }
 
@@ -1286,7 +1306,7 @@ fn assess(
         degenerate_faces: degenerate,
         regions_dissolved: r.dissolved,
         plane_halvings: r.plane_halvings,
-        plane_rule: surface.rule,
+        plane_rule: part.map(|_| surface.rule),
         regions_split: r.splits,
         merges: r.merges,
         polygons: r.polygons.polygons.len(),
@@ -1463,6 +1483,30 @@ pub(crate) mod testing {
         let t = Topology::build(&m, Path::new("cube")).unwrap();
         (m, t, side_of)
     }
+
+    /// A closed coin: radius 1, thickness `h`, `seg` segments around; caps as fans, the rim
+    /// one band of quads; outward counter-clockwise faces.
+    pub fn coin(seg: u32, h: f64) -> (TriMesh, Topology) {
+        let mut positions = vec![[0.0, 0.0, 0.0], [0.0, 0.0, h]];
+        for z in [0.0, h] {
+            for s in 0..seg {
+                let t = std::f64::consts::TAU * f64::from(s) / f64::from(seg);
+                positions.push([t.cos(), t.sin(), z]);
+            }
+        }
+        let bottom = |s: u32| 2 + s % seg;
+        let top = |s: u32| 2 + seg + s % seg;
+        let mut faces = Vec::new();
+        for s in 0..seg {
+            faces.push([0, bottom(s + 1), bottom(s)]);
+            faces.push([1, top(s), top(s + 1)]);
+            faces.push([bottom(s), bottom(s + 1), top(s + 1)]);
+            faces.push([bottom(s), top(s + 1), top(s)]);
+        }
+        let m = TriMesh { positions, faces };
+        let t = Topology::build(&m, Path::new("coin")).unwrap();
+        (m, t)
+    }
 }
 
 #[cfg(test)]
@@ -1495,6 +1539,33 @@ mod tests {
             }
             other => panic!("{:?}", other.map(|o| o.report)),
         }
+    }
+
+    /// A coin a twentieth as thick as it is wide: each piece of its rim is thinner than it is
+    /// bent (a sixth of the rim: sagitta 0.13 > thickness 0.05), so its least-squares plane
+    /// lies across it, parallel to the caps, and no partition into K = 8 regions is realised
+    /// on least-squares planes. On the planes the faces face (the fallback) the draws realise
+    /// the coin as a prism, and the report says which rule made it. (The search alone: on the
+    /// whole run the coin's convex polytope is nearer.)
+    #[test]
+    fn the_draws_realise_a_coin_on_the_planes_its_faces_face() {
+        let (m, t) = testing::coin(48, 0.05);
+        let mut surface = outline::Surface::new(&t, &m);
+        let opts = ApproxOptions::new(8);
+        let smoothed = smooth(&surface, &opts, &mut |_| {}).unwrap();
+        let (found, _) = search(&mut surface, &opts, &smoothed, Instant::now(), &mut |_| {});
+        let out = found.unwrap();
+        let r = &out.report;
+        assert_eq!(r.plane_rule, Some(PlaneRule::Facing), "{:?}", r.notes);
+        assert!(r
+            .notes
+            .iter()
+            .any(|n| n.contains("principal plane its faces face")));
+        assert!((3..=8).contains(&r.k_obtained), "{} regions", r.k_obtained);
+        assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
+        // The rim's regions stand on the caps: their planes are (nearly) vertical.
+        let caps = out.planes.iter().filter(|p| p.n[2].abs() > 0.99).count();
+        assert_eq!(caps, 2, "{:?}", out.planes);
     }
 
     /// A roof the smoothing flattened (one smoothed normal on both sides: no L2,1 error, no

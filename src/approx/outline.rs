@@ -60,7 +60,8 @@ pub struct Moments {
     /// Σ area-weighted normals (orients the plane).
     normal: V3,
     /// The input vertices' share of the faces (each vertex one, shared equally by its faces;
-    /// set by [`Surface::new`], zero elsewhere): what the headline error weighs them by.
+    /// set by [`Moments::of_faces`], zero for a lone triangle): what the headline error weighs
+    /// them by.
     weight: f64,
 }
 
@@ -81,13 +82,18 @@ impl Moments {
         }
     }
 
-    /// The moments of each face of `faces` (vertex indices into `pos`).
-    pub fn of_faces(pos: &[V3], faces: &[[u32; 3]]) -> Vec<Moments> {
+    /// The moments of each face of `faces` (vertex indices into `pos`), each with its share of
+    /// the input vertices (`weight`: each vertex weighs one, shared equally by its faces).
+    pub fn of_faces(topo: &Topology, pos: &[V3], faces: &[[u32; 3]]) -> Vec<Moments> {
         faces
             .iter()
             .map(|f| {
                 let [a, b, c] = f.map(|i| pos[i as usize]);
-                Moments::triangle(a, b, c)
+                let weight = f.iter().map(|&v| 1.0 / topo.vertex_faces(v).len() as f64);
+                Moments {
+                    weight: weight.sum(),
+                    ..Moments::triangle(a, b, c)
+                }
             })
             .collect()
     }
@@ -1379,7 +1385,7 @@ impl<'a> Surface<'a> {
             star_faces,
             on_border,
             face_box,
-            moments: vertex_weighted(topo, pos, faces),
+            moments: Moments::of_faces(topo, pos, faces),
             diag,
             rule: PlaneRule::LeastSquares,
             splits: Mutex::default(),
@@ -1471,19 +1477,6 @@ impl<'a> Surface<'a> {
             self.on_border[v as usize],
         )
     }
-}
-
-/// Each face's area moments with its share of the input vertices (`Moments::weight`: each
-/// vertex weighs one, shared equally by its faces).
-fn vertex_weighted(topo: &Topology, pos: &[V3], faces: &[[u32; 3]]) -> Vec<Moments> {
-    let mut m = Moments::of_faces(pos, faces);
-    for (m, f) in m.iter_mut().zip(faces) {
-        m.weight = f
-            .iter()
-            .map(|&v| 1.0 / topo.vertex_faces(v).len() as f64)
-            .sum();
-    }
-    m
 }
 
 /// A fingerprint of a list of labels or faces (64 bits), for the sets of partitions seen or
