@@ -532,47 +532,6 @@ fn pipeline_on_a_tube_gives_planar_strips_without_folds() {
     assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
 }
 
-/// A closed coin: radius 1, thickness `h`, `seg` segments around; caps as fans, the rim one
-/// band of quads; outward counter-clockwise faces.
-fn coin(seg: usize, h: f64) -> TriMesh {
-    let mut positions = vec![[0.0, 0.0, 0.0], [0.0, 0.0, h]];
-    for z in [0.0, h] {
-        for s in 0..seg {
-            let t = std::f64::consts::TAU * s as f64 / seg as f64;
-            positions.push([t.cos(), t.sin(), z]);
-        }
-    }
-    let bottom = |s: usize| (2 + s % seg) as u32;
-    let top = |s: usize| (2 + seg + s % seg) as u32;
-    let mut faces = Vec::new();
-    for s in 0..seg {
-        faces.push([0, bottom(s + 1), bottom(s)]);
-        faces.push([1, top(s), top(s + 1)]);
-        faces.push([bottom(s), bottom(s + 1), top(s + 1)]);
-        faces.push([bottom(s), top(s + 1), top(s)]);
-    }
-    TriMesh { positions, faces }
-}
-
-/// A coin a twentieth as thick as it is wide is realised on the planes its faces face (its
-/// rim's least-squares planes lie across it; the unit test of the draws shows that), but it is
-/// convex: its polytope of K = 8 support planes is nearer, and is what the run keeps, saying
-/// why. Every output valid either way.
-#[test]
-fn a_convex_input_keeps_its_polytope_where_that_is_nearer() {
-    let m = coin(48, 0.05);
-    let t = topo(&m);
-    let out = approximate(&m, &t, &ApproxOptions::new(8), &mut |_| {}).unwrap();
-    let r = &out.report;
-    assert_eq!((r.seed_used, r.plane_rule), (None, None), "{:?}", r.notes);
-    assert!(r.notes[0].contains("is farther away"), "{:?}", r.notes);
-    assert!(r.notes[0].contains("convex polytope"), "{:?}", r.notes);
-    assert!((4..=8).contains(&r.k_obtained), "{} regions", r.k_obtained);
-    assert!(r.max_planarity_deviation_rel <= 1e-6);
-    assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
-    assert_watertight(&out.polygons.polygons);
-}
-
 /// A run that lost its planes to merges says so, and only then: `block.obj` (tests/data) at
 /// K = 20 is realised only after merges that leave it more than a quarter farther from the
 /// input than the partition it realises; at K = 24 without a merge.

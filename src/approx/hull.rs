@@ -304,7 +304,7 @@ fn triangulated(facets: &[Vec<V3>], diag: f64) -> (PolygonMesh, Vec<usize>) {
 }
 
 /// Whether every polygon edge is met once each way (the facets close up).
-fn watertight(polygons: &[Vec<u32>]) -> bool {
+pub(super) fn watertight(polygons: &[Vec<u32>]) -> bool {
     let mut edges: HashMap<(u32, u32), usize> = HashMap::new();
     for p in polygons {
         for (i, &a) in p.iter().enumerate() {

@@ -1546,7 +1546,7 @@ mod tests {
     /// lies across it, parallel to the caps, and no partition into K = 8 regions is realised
     /// on least-squares planes. On the planes the faces face (the fallback) the draws realise
     /// the coin as a prism, and the report says which rule made it. (The search alone: on the
-    /// whole run the coin's convex polytope is nearer.)
+    /// whole run the coin's convex polytope is nearer: the next test.)
     #[test]
     fn the_draws_realise_a_coin_on_the_planes_its_faces_face() {
         let (m, t) = testing::coin(48, 0.05);
@@ -1566,6 +1566,22 @@ mod tests {
         // The rim's regions stand on the caps: their planes are (nearly) vertical.
         let caps = out.planes.iter().filter(|p| p.n[2].abs() > 0.99).count();
         assert_eq!(caps, 2, "{:?}", out.planes);
+    }
+
+    /// On the whole run the coin keeps its polytope of K = 8 support planes: it is convex, and
+    /// the polytope is nearer than what the draws realise (the test above); the run says why.
+    #[test]
+    fn a_convex_input_keeps_its_polytope_where_that_is_nearer() {
+        let (m, t) = testing::coin(48, 0.05);
+        let out = approximate(&m, &t, &ApproxOptions::new(8), &mut |_| {}).unwrap();
+        let r = &out.report;
+        assert_eq!((r.seed_used, r.plane_rule), (None, None), "{:?}", r.notes);
+        assert!(r.notes[0].contains("is farther away"), "{:?}", r.notes);
+        assert!(r.notes[0].contains("convex polytope"), "{:?}", r.notes);
+        assert!((4..=8).contains(&r.k_obtained), "{} regions", r.k_obtained);
+        assert!(r.max_planarity_deviation_rel <= 1e-6);
+        assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
+        assert!(hull::watertight(&out.polygons.polygons));
     }
 
     /// A roof the smoothing flattened (one smoothed normal on both sides: no L2,1 error, no
