@@ -483,7 +483,7 @@ fn or_polytope(
     let k = report.k_obtained;
     trace(|| {
         format!(
-            "the polytope: {k} planes, {:.3e}·diag, {secs:.3} s",
+            "the polytope: {k} planes, {:.3e}·diag, {secs:.3} s beside the search",
             mean / diag
         )
     });
