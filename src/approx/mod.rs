@@ -375,29 +375,28 @@ fn best_run(
     progress: &mut dyn FnMut(Stage),
 ) -> Result<ApproxOutput, ApproxError> {
     let t = Instant::now();
-    let mut surface = outline::Surface::new(topo, mesh);
+    let surface = outline::Surface::new(topo, mesh);
     let smoothed = smooth(&surface, opts, progress)?;
-    // The polytope needs no partition: made beside the search (on a surface of its own, the
-    // search's changes its plane rule), in the time its threads leave idle.
+    // The polytope needs no partition: made beside the search, in the time its threads leave
+    // idle (on the same surface: the search does not change it).
     std::thread::scope(|scope| {
         let polytope = scope.spawn(|| {
             let start = Instant::now();
-            let own = outline::Surface::new(topo, mesh);
-            let r = hull::polytope(&own, opts.k, opts.partition.lloyd_rounds);
+            let r = hull::polytope(&surface, opts.k, opts.partition.lloyd_rounds);
             (r, start.elapsed().as_secs_f64())
         });
-        let found = search(&mut surface, opts, &smoothed, t, progress);
-        let polytope = polytope
-            .join()
-            .unwrap_or_else(|e| std::panic::resume_unwind(e));
-        surface.rule = PlaneRule::default();
+        let found = search(&surface, mesh, opts, &smoothed, t, progress);
+        let polytope = polytope.join();
+        let polytope = polytope.unwrap_or_else(|e| std::panic::resume_unwind(e));
         or_polytope(&surface, opts, &smoothed, found, polytope, t)
     })
 }
 
-/// The draws of [`best_run`]: on the least-squares planes, then on the facing ones.
+/// The draws of [`best_run`]: on the least-squares planes of `surface`, then on the facing
+/// ones (a surface of `mesh` of that rule, made only then); with the realisations made.
 fn search(
-    surface: &mut outline::Surface<'_>,
+    surface: &outline::Surface<'_>,
+    mesh: &TriMesh,
     opts: &ApproxOptions,
     smoothed: &Smoothed,
     t: Instant,
@@ -415,8 +414,9 @@ fn search(
     let last = opts.restarts.max(tries_only);
     let found = match best_on(opts, last, smoothed, surface, t, &mut runs, progress) {
         Err(ApproxError::Unrealisable(least_squares)) => {
-            surface.rule = PlaneRule::Facing;
-            let facing = best_on(opts, tries_only, smoothed, surface, t, &mut runs, progress);
+            let mut facing = outline::Surface::new(topo, mesh);
+            facing.rule = PlaneRule::Facing;
+            let facing = best_on(opts, tries_only, smoothed, &facing, t, &mut runs, progress);
             facing.map_err(|e| match e {
                 ApproxError::Unrealisable(facing) => ApproxError::Unrealisable(format!(
                     "no run of seeds {}..={} gave a valid polygon mesh of the input ({}) with \
@@ -1550,10 +1550,10 @@ mod tests {
     #[test]
     fn the_draws_realise_a_coin_on_the_planes_its_faces_face() {
         let (m, t) = testing::coin(48, 0.05);
-        let mut surface = outline::Surface::new(&t, &m);
+        let surface = outline::Surface::new(&t, &m);
         let opts = ApproxOptions::new(8);
         let smoothed = smooth(&surface, &opts, &mut |_| {}).unwrap();
-        let (found, _) = search(&mut surface, &opts, &smoothed, Instant::now(), &mut |_| {});
+        let (found, _) = search(&surface, &m, &opts, &smoothed, Instant::now(), &mut |_| {});
         let out = found.unwrap();
         let r = &out.report;
         assert_eq!(r.plane_rule, Some(PlaneRule::Facing), "{:?}", r.notes);
@@ -1562,7 +1562,9 @@ mod tests {
             .iter()
             .any(|n| n.contains("principal plane its faces face")));
         assert!((3..=8).contains(&r.k_obtained), "{} regions", r.k_obtained);
+        assert!(r.max_planarity_deviation_rel <= 1e-6);
         assert_eq!(r.flipped_faces + r.degenerate_faces, 0);
+        assert!(hull::watertight(&out.polygons.polygons));
         // The rim's regions stand on the caps: their planes are (nearly) vertical.
         let caps = out.planes.iter().filter(|p| p.n[2].abs() > 0.99).count();
         assert_eq!(caps, 2, "{:?}", out.planes);
