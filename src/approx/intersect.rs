@@ -35,6 +35,17 @@ fn distances(t: [V3; 3], o: V3, n: V3, tol: f64) -> [f64; 3] {
         .map(|d| if d.abs() <= tol * len { 0.0 } else { d / len })
 }
 
+/// The corners triangles `a` and `b` share (in `a`'s order) and how many: asked of every
+/// pair of nearby triangles on every build, so in place, not in a list of their own.
+fn shared(a: [u32; 3], b: [u32; 3]) -> ([u32; 3], usize) {
+    let (mut s, mut n) = ([0; 3], 0);
+    for x in a.into_iter().filter(|x| b.contains(x)) {
+        s[n] = x;
+        n += 1;
+    }
+    (s, n)
+}
+
 /// Whether triangles `a` and `b`, lying in one plane (normal `n`), overlap in their
 /// interiors: an edge of one properly crosses an edge of the other, a corner of one not
 /// shared lies strictly inside the other, or, sharing an edge, they lie on one side of it.
@@ -46,7 +57,8 @@ fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
         .unwrap_or(2);
     let (u, v) = ((m + 1) % 3, (m + 2) % 3);
     let p = |i: u32| [pos[i as usize][u], pos[i as usize][v]];
-    let shared: Vec<u32> = a.iter().copied().filter(|x| b.contains(x)).collect();
+    let (common, n) = shared(a, b);
+    let shared = &common[..n];
     if shared.len() == 3 {
         return true;
     }
@@ -110,7 +122,8 @@ fn overlap_on_common_line(
 /// corner passes through the other (their planes' common line starts at the corner and leaves
 /// one of them through that edge); sharing none, when an edge of one passes through the other.
 fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3], tol: f64) -> bool {
-    let shared: Vec<u32> = a.iter().copied().filter(|x| b.contains(x)).collect();
+    let (common, n) = shared(a, b);
+    let shared = &common[..n];
     let ta = a.map(|i| pos[i as usize]);
     let tb = b.map(|i| pos[i as usize]);
     let (na, nb) = (face_area_normal(pos, a), face_area_normal(pos, b));

@@ -320,9 +320,10 @@ enum Junction {
 /// passes them.
 struct Corners {
     positions: Vec<V3>,
-    /// Input vertex each corner belongs to, and the regions whose planes place it.
+    /// Input vertex each corner belongs to, and the regions whose planes place it (the
+    /// junction's, [`OUTSIDE`] where there are fewer: [`Corners::regions`]).
     vertex: Vec<u32>,
-    regions: Vec<Vec<u32>>,
+    junction: Vec<[u32; 3]>,
     /// (vertex, region, first, end): that region's corners at the vertex, in outline order,
     /// are `at_corners[first..end]`; ascending by vertex (the order they are found in).
     at: Vec<(u32, u32, u32, u32)>,
@@ -333,6 +334,13 @@ struct Corners {
 }
 
 impl Corners {
+    /// The regions whose planes place corner `c`.
+    fn regions(&self, c: u32) -> impl Iterator<Item = u32> + '_ {
+        self.junction[c as usize]
+            .into_iter()
+            .filter(|&r| r != OUTSIDE)
+    }
+
     /// Region `r`'s corners at vertex `v`, in outline order.
     fn at(&self, v: u32, r: u32) -> Option<&[u32]> {
         let first = self.first_at[v as usize];
@@ -395,20 +403,24 @@ fn place(j: Junction, planes: &[Plane], x: V3) -> Option<V3> {
 }
 
 /// The corners of every vertex where regions meet (see the module doc); corners of one
-/// junction closer than `tol` are one. Only the vertices `on_loop` (on a region's boundary
-/// loop) are looked at: the others are inside a region.
+/// junction closer than `tol` are one. `passes` counts the regions' boundary loops passing
+/// through each vertex: only the vertices passed on the border, or passed three times or more,
+/// are looked at. (An inner vertex is passed once for each run of one region's faces around
+/// it, as each such run ends at one boundary edge of its region leaving the vertex: passed
+/// twice, it lies on the boundary between two regions and has no corner; never, it lies inside
+/// a region.)
 fn corners(
     s: &Surface<'_>,
     labels: &[u32],
     planes: &[Plane],
     size: &[f64],
-    on_loop: &[bool],
+    passes: &[u8],
 ) -> Result<Corners, Defect> {
     let (pos, tol) = (s.pos, s.tol());
     let mut out = Corners {
         positions: Vec::new(),
         vertex: Vec::new(),
-        regions: Vec::new(),
+        junction: Vec::new(),
         at: Vec::new(),
         at_corners: Vec::new(),
         first_at: vec![u32::MAX; s.topo.n_vertices],
@@ -418,8 +430,8 @@ fn corners(
     // visited on every build).
     let (mut seq, mut sorted, mut cycle, mut ids, mut cs) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for v in (0..s.topo.n_vertices as u32).filter(|&v| on_loop[v as usize]) {
-        // A vertex on a boundary loop is on the border or has two regions around it.
+    let junction = |v: usize| passes[v] >= 3 || (passes[v] > 0 && s.on_border[v]);
+    for v in (0..s.topo.n_vertices as u32).filter(|&v| junction(v as usize)) {
         let (fs, border) = s.star(v);
         if fs.is_empty() {
             continue;
@@ -445,7 +457,7 @@ fn corners(
             out.set_at(v, seq[0], [c_id]);
             out.positions.push(c);
             out.vertex.push(v);
-            out.regions.push(vec![seq[0]]);
+            out.junction.push([seq[0], OUTSIDE, OUTSIDE]);
             continue;
         }
         if !border && seq.len() < 3 {
@@ -540,8 +552,7 @@ fn corners(
             ids.push(out.positions.len() as u32);
             out.positions.push(c);
             out.vertex.push(v);
-            out.regions
-                .push(regions.iter().copied().filter(|&r| r != OUTSIDE).collect());
+            out.junction.push(regions);
         }
         // Region cycle[j] passes its triangles from the side of its incoming neighbour (the
         // next region counter-clockwise) to its outgoing one: the root all of them ascending,
@@ -566,6 +577,15 @@ fn corners(
         }
     }
     Ok(out)
+}
+
+/// How many times the regions' boundary `loops` pass through each vertex (at most 255).
+fn loop_passes<'a>(n_vertices: usize, loops: impl Iterator<Item = &'a Vec<Vec<u32>>>) -> Vec<u8> {
+    let mut passes = vec![0u8; n_vertices];
+    for &v in loops.flatten().flatten() {
+        passes[v as usize] = passes[v as usize].saturating_add(1);
+    }
+    passes
 }
 
 /// Even–odd point-in-polygon test.
@@ -594,8 +614,8 @@ fn coincident(cs: &Corners, pos: &[V3], tol: f64) -> Option<Defect> {
                 break;
             }
             if cs.vertex[a] != cs.vertex[b] && norm(d) <= tol {
-                let mut regions = cs.regions[a].clone();
-                regions.extend_from_slice(&cs.regions[b]);
+                let mut regions: Vec<u32> =
+                    cs.regions(a as u32).chain(cs.regions(b as u32)).collect();
                 regions.sort_unstable();
                 regions.dedup();
                 let (v, w) = (cs.vertex[a], cs.vertex[b]);
@@ -640,8 +660,7 @@ fn region_outlines(
             let p = |x: u32| cs.positions[x as usize];
             let chord = sub(p(b), p(a));
             let off = cross(chord, sub(p(c), p(a)));
-            if cs.regions[c as usize].len() == 1 && dot(off, off).sqrt() <= 1e-6 * dot(chord, chord)
-            {
+            if cs.regions(c).count() == 1 && dot(off, off).sqrt() <= 1e-6 * dot(chord, chord) {
                 ol.remove(i);
                 i = i.saturating_sub(1);
             } else {
@@ -758,7 +777,7 @@ fn region_polygon(
             if segments_cross(a, b, to2(ids[j].0), to2(ids[j].1)) {
                 let mut regions: Vec<u32> = [ids[i].0, ids[i].1, ids[j].0, ids[j].1]
                     .iter()
-                    .flat_map(|&c| cs.regions[c as usize].iter().copied())
+                    .flat_map(|&c| cs.regions(c))
                     .collect();
                 regions.sort_unstable();
                 regions.dedup();
@@ -809,11 +828,8 @@ fn build_sized(
     // polygons between them).
     regions.trace_loops(s);
     // Corners are only where regions meet or the surface ends: on the regions' boundary loops.
-    let mut on_loop = vec![false; s.topo.n_vertices];
-    for &v in regions.loops.iter().flatten().flatten().flatten() {
-        on_loop[v as usize] = true;
-    }
-    let cs = corners(s, &regions.labels, planes, &size, &on_loop)?;
+    let passes = loop_passes(s.topo.n_vertices, regions.loops.iter().flatten());
+    let cs = corners(s, &regions.labels, planes, &size, &passes)?;
     if let Some(d) = coincident(&cs, s.pos, s.tol()) {
         return Err(d);
     }
@@ -867,19 +883,21 @@ pub struct Realised {
     pub closes_handles: bool,
 }
 
-/// Regions sharing an edge, as sorted pairs (each shared edge met once, each pair sorted once).
+/// Regions sharing an edge, as sorted pairs, ascending. (The edges between two regions are
+/// many and mostly met in runs: a run adds its pair once, the sort removes the rest.)
 fn adjacent_pairs(topo: &Topology, labels: &[u32]) -> Vec<(u32, u32)> {
-    let mut pairs = HashSet::new();
+    let mut pairs = Vec::new();
     for &e in &topo.interior_edges {
         let [f, g] = topo.edge_faces[e as usize];
         let (a, b) = (labels[f as usize], labels[g as usize]);
-        if a != b {
-            pairs.insert((a.min(b), a.max(b)));
+        let pair = (a.min(b), a.max(b));
+        if a != b && pairs.last() != Some(&pair) {
+            pairs.push(pair);
         }
     }
-    let mut p: Vec<(u32, u32)> = pairs.into_iter().collect();
-    p.sort_unstable();
-    p
+    pairs.sort_unstable();
+    pairs.dedup();
+    pairs
 }
 
 /// Each region's moments, plane fit and bounding box under the labels of the last
@@ -905,6 +923,14 @@ struct Regions {
     close_handles: bool,
     /// The surface's plane rule at the last update (by which `fit` was made).
     rule: PlaneRule,
+    /// Each region's identity: kept while its faces are (its values with them), a new one
+    /// when they change.
+    ids: Vec<u64>,
+    next_id: u64,
+    /// [`Regions::merge_cost`] by the pair's identities (in the order asked): a search asks
+    /// the cost of every adjacent pair at each defect, while a split or a merge changes one
+    /// or two regions. The same values, without a plane fit per pair per defect.
+    merge_costs: std::cell::RefCell<HashMap<(u64, u64), f64>>,
 }
 
 impl Regions {
@@ -1018,6 +1044,23 @@ impl Regions {
         self.loops = (0..n)
             .map(|b| old(b).and_then(|a| old_loops[a].take()))
             .collect();
+        let old_ids = std::mem::take(&mut self.ids);
+        self.ids = (0..n)
+            .map(|b| {
+                old(b).map_or_else(
+                    || {
+                        self.next_id += 1;
+                        self.next_id
+                    },
+                    |a| old_ids[a],
+                )
+            })
+            .collect();
+        // Costs of pairs whose regions both live on (a region never comes back).
+        let live: HashSet<u64> = self.ids.iter().copied().collect();
+        self.merge_costs
+            .get_mut()
+            .retain(|(x, y), _| live.contains(x) && live.contains(y));
         self.members = members;
         self.moments = moments;
         self.boxes = boxes;
@@ -1061,11 +1104,14 @@ impl Regions {
     /// meshed, large flat faces in a few triangles) the merge that costs least per unit area
     /// can be the one that costs most by that error.
     fn merge_cost(&self, (a, b): (u32, u32)) -> f64 {
-        let (ma, mb) = (&self.moments[a as usize], &self.moments[b as usize]);
-        let merged = ma.add(mb);
-        merged.per_vertex(self.fit_of(&merged).1)
-            - ma.per_vertex(self.fit[a as usize].1)
-            - mb.per_vertex(self.fit[b as usize].1)
+        let key = (self.ids[a as usize], self.ids[b as usize]);
+        *self.merge_costs.borrow_mut().entry(key).or_insert_with(|| {
+            let (ma, mb) = (&self.moments[a as usize], &self.moments[b as usize]);
+            let merged = ma.add(mb);
+            merged.per_vertex(self.fit_of(&merged).1)
+                - ma.per_vertex(self.fit[a as usize].1)
+                - mb.per_vertex(self.fit[b as usize].1)
+        })
     }
 
     /// The adjacent pair among `pairs` whose merge costs least (each cost a plane fit,
@@ -1981,7 +2027,8 @@ mod tests {
     }
 
     /// `Regions` kept across label changes gives exactly (bit for bit) what summing every
-    /// region afresh gives, and the boundary loops that tracing every region afresh gives
+    /// region afresh gives, the merge costs pricing every pair afresh gives, and the boundary
+    /// loops that tracing every region afresh gives
     /// (traced again only where a region's faces changed): after a split (two regions
     /// change), a merge (one region grows, the ones after the removed one are renumbered), a
     /// relabelling that swaps two regions' numbers, and a face moved between regions.
@@ -2021,6 +2068,12 @@ mod tests {
                     })
                     .collect();
                 assert_eq!(regions.sizes(), sizes);
+                // Every pair's merge cost (cached across updates) as priced afresh.
+                let afresh = Regions::of(s, labels, n);
+                for pair in adjacent_pairs(s.topo, labels) {
+                    let (c, d) = (regions.merge_cost(pair), afresh.merge_cost(pair));
+                    assert_eq!(c.to_bits(), d.to_bits(), "pair {pair:?}");
+                }
                 regions.trace_loops(s);
                 let all: Vec<u32> = (0..labels.len() as u32).collect();
                 let traced = region_loops(s.topo, s.faces, labels, n, &vec![true; n], &all);
@@ -2070,6 +2123,40 @@ mod tests {
             regions,
         };
         assert_eq!(build(&s, &labels, &planes, false).err(), Some(touching));
+    }
+
+    /// The boundary loops pass through each inner vertex once per run of one region's faces
+    /// around it (what `corners` relies on to skip the vertices between two regions): on the
+    /// cube's sides (three runs at a corner, two along an edge), and under labels that make
+    /// regions meet themselves around vertices.
+    #[test]
+    fn loops_pass_each_vertex_once_per_run_of_a_region_around_it() {
+        on_cube(|s, sides| {
+            let mixed: Vec<u32> = (0..sides.len() as u32).map(|f| f % 3).collect();
+            let halves: Vec<u32> = sides.iter().map(|&x| x % 2).collect();
+            // Runs met (the cube's corners and edges, and pinches under the mixed labels).
+            let mut met = HashSet::new();
+            for labels in [sides.to_vec(), mixed, halves] {
+                let n = labels.iter().max().map_or(0, |&m| m as usize + 1);
+                let all: Vec<u32> = (0..labels.len() as u32).collect();
+                let loops = region_loops(s.topo, s.faces, &labels, n, &vec![true; n], &all);
+                let passes = loop_passes(s.topo.n_vertices, loops.iter());
+                for v in 0..s.topo.n_vertices as u32 {
+                    let (fs, border) = s.star(v);
+                    assert!(!border);
+                    let mut runs: Vec<u32> = fs.iter().map(|&f| labels[f as usize]).collect();
+                    runs.dedup();
+                    if runs.len() > 1 && runs.first() == runs.last() {
+                        runs.pop();
+                    }
+                    let runs = if runs.len() == 1 { 0 } else { runs.len() };
+                    assert_eq!(passes[v as usize] as usize, runs, "vertex {v}");
+                    met.insert(runs);
+                }
+            }
+            let many = met.iter().any(|&r| r > 3);
+            assert!([0, 2, 3].iter().all(|r| met.contains(r)) && many, "{met:?}");
+        });
     }
 
     /// A realisation whose stop flag is set gives no polygon mesh (its result is not wanted);
