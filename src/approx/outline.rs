@@ -883,23 +883,6 @@ pub struct Realised {
     pub closes_handles: bool,
 }
 
-/// Regions sharing an edge, as sorted pairs, ascending. (The edges between two regions are
-/// many and mostly met in runs: a run adds its pair once, the sort removes the rest.)
-fn adjacent_pairs(topo: &Topology, labels: &[u32]) -> Vec<(u32, u32)> {
-    let mut pairs = Vec::new();
-    for &e in &topo.interior_edges {
-        let [f, g] = topo.edge_faces[e as usize];
-        let (a, b) = (labels[f as usize], labels[g as usize]);
-        let pair = (a.min(b), a.max(b));
-        if a != b && pairs.last() != Some(&pair) {
-            pairs.push(pair);
-        }
-    }
-    pairs.sort_unstable();
-    pairs.dedup();
-    pairs
-}
-
 /// Each region's moments, plane fit and bounding box under the labels of the last
 /// [`Regions::update`], kept across the builds of one realisation. A region whose faces are
 /// exactly one region's faces of last time keeps that region's values: a split or a merge
@@ -915,6 +898,10 @@ struct Regions {
     boxes: Vec<[V3; 2]>,
     /// Each region's faces, ascending.
     members: Vec<Vec<u32>>,
+    /// Each region's faces with an edge neighbour in another region, ascending: what the
+    /// pairs of adjacent regions are read from ([`Regions::adjacent_pairs`]), the same while
+    /// the region's faces are.
+    boundary: Vec<Vec<u32>>,
     /// Each region's boundary loops ([`region_loops`]), once a build has traced them.
     loops: Vec<Option<Vec<Vec<u32>>>>,
     /// Whether a loop with no corner between two regions is left out of both polygons (a
@@ -1061,6 +1048,19 @@ impl Regions {
         self.merge_costs
             .get_mut()
             .retain(|(x, y), _| live.contains(x) && live.contains(y));
+        let mut old_boundary = std::mem::take(&mut self.boundary);
+        self.boundary = (0..n)
+            .map(|b| match old(b) {
+                Some(a) => std::mem::take(&mut old_boundary[a]),
+                None => members[b]
+                    .iter()
+                    .copied()
+                    .filter(|&f| {
+                        super::lloyd::neighbors(s.topo, f as usize).any(|g| labels[g] != b as u32)
+                    })
+                    .collect(),
+            })
+            .collect();
         self.members = members;
         self.moments = moments;
         self.boxes = boxes;
@@ -1085,6 +1085,28 @@ impl Regions {
                 *cached = Some(loops);
             }
         }
+    }
+
+    /// The regions sharing an edge, as sorted pairs, ascending: read from the regions' faces
+    /// along their boundaries, not from every edge of the mesh (a search asks for them at every
+    /// defect).
+    fn adjacent_pairs(&self, topo: &Topology) -> Vec<(u32, u32)> {
+        let mut pairs = Vec::new();
+        for (r, faces) in self.boundary.iter().enumerate() {
+            let r = r as u32;
+            for &f in faces {
+                for g in super::lloyd::neighbors(topo, f as usize) {
+                    let l = self.labels[g];
+                    // Each pair from its lower region's side; a run along a boundary once.
+                    if l > r && pairs.last() != Some(&(r, l)) {
+                        pairs.push((r, l));
+                    }
+                }
+            }
+        }
+        pairs.sort_unstable();
+        pairs.dedup();
+        pairs
     }
 
     /// The plane of faces with moments `m` and its residual, by the regions' rule.
@@ -1663,7 +1685,7 @@ fn search(
         // the caps end the alternation of splits and merges.
         // The regions sharing an edge, made once per defect when first asked for.
         let pairs = std::cell::OnceCell::new();
-        let pairs = || pairs.get_or_init(|| adjacent_pairs(topo, &st.labels));
+        let pairs = || pairs.get_or_init(|| st.regions.adjacent_pairs(topo));
         let used = if st.n < k {
             &mut st.late_splits
         } else {
@@ -2027,8 +2049,9 @@ mod tests {
     }
 
     /// `Regions` kept across label changes gives exactly (bit for bit) what summing every
-    /// region afresh gives, the merge costs pricing every pair afresh gives, and the boundary
-    /// loops that tracing every region afresh gives
+    /// region afresh gives, the merge costs pricing every pair afresh gives, the pairs of
+    /// adjacent regions every edge gives, and the boundary loops that tracing every region
+    /// afresh gives
     /// (traced again only where a region's faces changed): after a split (two regions
     /// change), a merge (one region grows, the ones after the removed one are renumbered), a
     /// relabelling that swaps two regions' numbers, and a face moved between regions.
@@ -2070,7 +2093,16 @@ mod tests {
                 assert_eq!(regions.sizes(), sizes);
                 // Every pair's merge cost (cached across updates) as priced afresh.
                 let afresh = Regions::of(s, labels, n);
-                for pair in adjacent_pairs(s.topo, labels) {
+                // The pairs, from every edge of the mesh.
+                let mut pairs: Vec<(u32, u32)> = (s.topo.interior_edges.iter())
+                    .map(|&e| s.topo.edge_faces[e as usize].map(|f| labels[f as usize]))
+                    .filter(|[a, b]| a != b)
+                    .map(|[a, b]| (a.min(b), a.max(b)))
+                    .collect();
+                pairs.sort_unstable();
+                pairs.dedup();
+                assert_eq!(regions.adjacent_pairs(s.topo), pairs);
+                for pair in pairs {
                     let (c, d) = (regions.merge_cost(pair), afresh.merge_cost(pair));
                     assert_eq!(c.to_bits(), d.to_bits(), "pair {pair:?}");
                 }
