@@ -37,7 +37,7 @@ fn distances(t: [V3; 3], o: V3, n: V3, tol: f64) -> [f64; 3] {
 
 /// The corners triangles `a` and `b` share (in `a`'s order) and how many: asked of every
 /// pair of nearby triangles on every build, so in place, not in a list of their own.
-fn shared(a: [u32; 3], b: [u32; 3]) -> ([u32; 3], usize) {
+fn common_corners(a: [u32; 3], b: [u32; 3]) -> ([u32; 3], usize) {
     let (mut s, mut n) = ([0; 3], 0);
     for x in a.into_iter().filter(|x| b.contains(x)) {
         s[n] = x;
@@ -49,7 +49,8 @@ fn shared(a: [u32; 3], b: [u32; 3]) -> ([u32; 3], usize) {
 /// Whether triangles `a` and `b`, lying in one plane (normal `n`), overlap in their
 /// interiors: an edge of one properly crosses an edge of the other, a corner of one not
 /// shared lies strictly inside the other, or, sharing an edge, they lie on one side of it.
-fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
+/// `shared`: the corners they share ([`common_corners`]).
+fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], shared: &[u32], n: V3) -> bool {
     // The plane seen along its normal's largest axis, the other two kept in order so that
     // orientations keep their sign up to that of the dropped axis (the same for both).
     let m = (0..3)
@@ -57,8 +58,6 @@ fn overlap_in_plane(pos: &[V3], a: [u32; 3], b: [u32; 3], n: V3) -> bool {
         .unwrap_or(2);
     let (u, v) = ((m + 1) % 3, (m + 2) % 3);
     let p = |i: u32| [pos[i as usize][u], pos[i as usize][v]];
-    let (common, n) = shared(a, b);
-    let shared = &common[..n];
     if shared.len() == 3 {
         return true;
     }
@@ -122,14 +121,14 @@ fn overlap_on_common_line(
 /// corner passes through the other (their planes' common line starts at the corner and leaves
 /// one of them through that edge); sharing none, when an edge of one passes through the other.
 fn cross_pair(pos: &[V3], a: [u32; 3], b: [u32; 3], tol: f64) -> bool {
-    let (common, n) = shared(a, b);
-    let shared = &common[..n];
+    let (common, count) = common_corners(a, b);
+    let shared = &common[..count];
     let ta = a.map(|i| pos[i as usize]);
     let tb = b.map(|i| pos[i as usize]);
     let (na, nb) = (face_area_normal(pos, a), face_area_normal(pos, b));
     let (da, db) = (distances(ta, tb[0], nb, tol), distances(tb, ta[0], na, tol));
     if da.iter().chain(&db).all(|&d| d == 0.0) {
-        return overlap_in_plane(pos, a, b, na);
+        return overlap_in_plane(pos, a, b, shared, na);
     }
     // A corner not shared on the other's plane: the orientations the sign tests below rest on
     // are zero there up to rounding, so Möller's interval test decides too.

@@ -1023,44 +1023,26 @@ impl Regions {
             moments.push(m);
             boxes.push(bx);
         }
-        self.fit = (0..n)
-            .map(|b| old(b).map_or_else(|| fit_or_flat(&moments[b], s.rule), |a| self.fit[a]))
-            .collect();
-        let mut old_loops = std::mem::take(&mut self.loops);
-        old_loops.resize(self.moments.len(), None);
-        self.loops = (0..n)
-            .map(|b| old(b).and_then(|a| old_loops[a].take()))
-            .collect();
-        let old_ids = std::mem::take(&mut self.ids);
-        self.ids = (0..n)
-            .map(|b| {
-                old(b).map_or_else(
-                    || {
-                        self.next_id += 1;
-                        self.next_id
-                    },
-                    |a| old_ids[a],
-                )
-            })
-            .collect();
+        self.fit = carried(std::mem::take(&mut self.fit), n, old, |b| {
+            fit_or_flat(&moments[b], s.rule)
+        });
+        self.loops = carried(std::mem::take(&mut self.loops), n, old, |_| None);
+        let next_id = &mut self.next_id;
+        self.ids = carried(std::mem::take(&mut self.ids), n, old, |_| {
+            *next_id += 1;
+            *next_id
+        });
         // Costs of pairs whose regions both live on (a region never comes back).
         let live: HashSet<u64> = self.ids.iter().copied().collect();
         self.merge_costs
             .get_mut()
             .retain(|(x, y), _| live.contains(x) && live.contains(y));
-        let mut old_boundary = std::mem::take(&mut self.boundary);
-        self.boundary = (0..n)
-            .map(|b| match old(b) {
-                Some(a) => std::mem::take(&mut old_boundary[a]),
-                None => members[b]
-                    .iter()
-                    .copied()
-                    .filter(|&f| {
-                        super::lloyd::neighbors(s.topo, f as usize).any(|g| labels[g] != b as u32)
-                    })
-                    .collect(),
-            })
-            .collect();
+        self.boundary = carried(std::mem::take(&mut self.boundary), n, old, |b| {
+            let outside = |f: &u32| {
+                super::lloyd::neighbors(s.topo, *f as usize).any(|g| labels[g] != b as u32)
+            };
+            members[b].iter().copied().filter(outside).collect()
+        });
         self.members = members;
         self.moments = moments;
         self.boxes = boxes;
@@ -1155,6 +1137,24 @@ impl Regions {
             })
             .collect()
     }
+}
+
+/// Each new region `b`'s value in [`Regions::update`]: the value in `prev` of the old region
+/// it keeps (`old(b)`), or `fresh(b)` where its faces changed.
+fn carried<T>(
+    prev: Vec<T>,
+    n: usize,
+    old: impl Fn(usize) -> Option<usize>,
+    mut fresh: impl FnMut(usize) -> T,
+) -> Vec<T> {
+    let mut prev: Vec<Option<T>> = prev.into_iter().map(Some).collect();
+    (0..n)
+        .map(|b| {
+            old(b)
+                .and_then(|a| prev.get_mut(a).and_then(Option::take))
+                .unwrap_or_else(|| fresh(b))
+        })
+        .collect()
 }
 
 fn fit_or_flat(m: &Moments, rule: PlaneRule) -> (Plane, f64) {
